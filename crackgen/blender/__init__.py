@@ -1,0 +1,1 @@
+"""The only place bpy is imported. Imported by the generator worker alone."""

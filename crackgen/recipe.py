@@ -1,0 +1,399 @@
+"""Recipe: the TOML file a dataset is made from, validated into typed models.
+
+Every field has a default and a unit in its name (``_m``, ``_deg``, ``_px``,
+``_k``, ``_w``) or in its doc. Random parameters are distributions:
+a constant, ``{min = a, max = b}`` (uniform) or ``{choices = [...], weights = [...]}``.
+Unknown keys are errors. ``load_recipe`` refuses a bad recipe before any work,
+with one ``field.path: problem`` line per problem (``RecipeError``).
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+import tomllib
+from pathlib import Path
+from typing import Annotated, Any, Callable, Union
+
+import numpy as np
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic_core import PydanticCustomError
+
+Scalar = Union[bool, int, float, str]
+
+
+class RecipeError(ValueError):
+    """A recipe that cannot be used; ``problems`` holds one line per problem."""
+
+    def __init__(self, problems: list[str], source: str = "recipe"):
+        self.problems = problems
+        self.source = source
+        super().__init__("\n".join(problems))
+
+
+class Dist(BaseModel):
+    """A constant, a uniform ``{min, max}`` or a weighted ``{choices, weights}``."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    value: Scalar | None = None
+    min: float | None = None
+    max: float | None = None
+    choices: list[Scalar] | None = None
+    weights: list[float] | None = None
+
+    @model_validator(mode="before")
+    @classmethod
+    def _wrap_constant(cls, data: Any) -> Any:
+        if isinstance(data, (bool, int, float, str)):
+            return {"value": data}
+        if isinstance(data, list):
+            raise PydanticCustomError("dist", "a list is not a distribution; use {choices = [...]}")
+        return data
+
+    @model_validator(mode="after")
+    def _check_form(self) -> "Dist":
+        forms = [self.value is not None, self.min is not None or self.max is not None, self.choices is not None]
+        if sum(forms) != 1:
+            raise PydanticCustomError("dist", "give a constant, {min, max} or {choices, weights}")
+        if forms[1]:
+            if self.min is None or self.max is None:
+                missing = "min" if self.min is None else "max"
+                raise PydanticCustomError("dist_sub", "{sub}: required with a range", {"sub": missing})
+            if not (math.isfinite(self.min) and math.isfinite(self.max)):
+                raise PydanticCustomError("dist", "min and max must be finite")
+            if not self.max > self.min:
+                raise PydanticCustomError("dist_sub", "{sub}: must be > {ref}", {"sub": "max", "ref": "min"})
+        if forms[2]:
+            if len(self.choices) == 0:
+                raise PydanticCustomError("dist_sub", "{sub}: must not be empty", {"sub": "choices"})
+            if self.weights is not None:
+                if len(self.weights) != len(self.choices):
+                    raise PydanticCustomError(
+                        "dist_sub", "{sub}: must have one weight per choice", {"sub": "weights"}
+                    )
+                if any(w < 0 or not math.isfinite(w) for w in self.weights) or sum(self.weights) <= 0:
+                    raise PydanticCustomError(
+                        "dist_sub", "{sub}: must be >= 0 with a positive sum", {"sub": "weights"}
+                    )
+        elif self.weights is not None:
+            raise PydanticCustomError("dist_sub", "{sub}: only allowed with choices", {"sub": "weights"})
+        return self
+
+    def support(self) -> list[Scalar]:
+        """Values the distribution can produce (range ends for uniform)."""
+        if self.value is not None:
+            return [self.value]
+        if self.choices is not None:
+            return list(self.choices)
+        return [self.min, self.max]
+
+    def draw(self, rng: np.random.Generator) -> Any:
+        """One draw. Always consumes exactly one random number, so spec layouts stay stable."""
+        u = float(rng.random())
+        if self.value is not None:
+            return self.value
+        if self.choices is not None:
+            w = np.asarray(self.weights if self.weights is not None else [1.0] * len(self.choices), float)
+            cdf = np.cumsum(w / w.sum())
+            return self.choices[min(int(np.searchsorted(cdf, u, side="right")), len(self.choices) - 1)]
+        return float(self.min + (self.max - self.min) * u)
+
+    def describe(self) -> str:
+        if self.value is not None:
+            return repr(self.value)
+        if self.choices is not None:
+            w = f" weights={self.weights}" if self.weights else ""
+            return f"choice{self.choices}{w}"
+        return f"uniform[{self.min:g}, {self.max:g}]"
+
+
+def _numeric(lo: float, hi: float, integer: bool = False, lo_open: bool = False) -> Callable[[Dist], Dist]:
+    def check(d: Dist) -> Dist:
+        for v in d.support():
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise PydanticCustomError("dist", "must be a number, got {v!r}", {"v": v})
+            if integer and d.min is None and float(v) != int(v):
+                raise PydanticCustomError("dist", "must be an integer, got {v!r}", {"v": v})
+            if (v <= lo if lo_open else v < lo) or v > hi:
+                lb = "(" if lo_open else "["
+                raise PydanticCustomError("dist", f"must be within {lb}{lo:g}, {hi:g}], got {v!r}", {})
+        if integer and d.min is not None:
+            raise PydanticCustomError("dist", "must be a constant or {choices}: an integer parameter", {})
+        return d
+
+    return check
+
+
+def _one_of(*allowed: str) -> Callable[[Dist], Dist]:
+    def check(d: Dist) -> Dist:
+        if d.min is not None:
+            raise PydanticCustomError("dist", "must be a constant or {choices}, not a range", {})
+        for v in d.support():
+            if v not in allowed:
+                raise PydanticCustomError("dist", f"unknown value {v!r}; allowed: {', '.join(allowed)}", {})
+        return d
+
+    return check
+
+
+class Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_default=True)
+
+
+# Field helpers: _t = numeric distribution type with range, _c = categorical type, _d = default + doc.
+def _t(lo: float, hi: float, integer: bool = False, lo_open: bool = False) -> Any:
+    return Annotated[Dist, AfterValidator(_numeric(lo, hi, integer, lo_open))]
+
+
+def _c(*allowed: str) -> Any:
+    return Annotated[Dist, AfterValidator(_one_of(*allowed))]
+
+
+def _d(default: Any, doc: str) -> Any:
+    return Field(default_factory=lambda: Dist.model_validate(default), description=doc)
+
+
+FAMILIES = ("asphalt", "concrete", "masonry", "steel")
+
+
+class DatasetSection(Section):
+    name: str = Field("crackgen", description="dataset name, written to the manifest")
+    seed: int = Field(0, ge=0, le=2**63 - 1, description="root seed; sample i uses SeedSequence([seed, i])")
+    samples: int = Field(8, ge=1, le=10_000_000, description="number of samples")
+    shard_size: int = Field(4, ge=1, le=100_000, description="samples per shard (the unit of work)")
+
+
+class CrackSection(Section):
+    frequency_x: _t(0, 64, lo_open=True) = _d({"min": 1.5, "max": 4.0}, "fBm base frequency f_x, cycles per surface width")
+    frequency_y: _t(0, 64, lo_open=True) = _d({"min": 1.5, "max": 4.0}, "fBm base frequency f_y, cycles per surface height")
+    octaves: _t(1, 12, integer=True) = _d({"choices": [4, 5, 6]}, "fBm octaves O (integer)")
+    persistence: _t(0, 1, lo_open=True) = _d({"min": 0.45, "max": 0.6}, "fBm persistence P (amplitude ratio per octave)")
+    lacunarity: _t(1, 4, lo_open=True) = _d({"min": 1.9, "max": 2.2}, "fBm lacunarity L (frequency ratio per octave)")
+    threshold: _t(0, 1, lo_open=True) = _d({"min": 0.015, "max": 0.04}, "mask = Z < threshold; sets crack width (unitless)")
+    depth_m: _t(0, 0.2) = _d({"min": 0.004, "max": 0.015}, "crack depth (m) at the crack centre line")
+
+
+class SurfaceSection(Section):
+    size_m: _t(0.05, 100, lo_open=True) = _d({"min": 2.0, "max": 3.0}, "side of the square surface patch (m)")
+    grid_px: int = Field(384, ge=8, le=4096, description="mesh vertices per side")
+    crackmap_px: int = Field(1024, ge=16, le=8192, description="crack map resolution per side (px)")
+
+
+class DistractorSection(Section):
+    joint: float = Field(0.2, ge=0, le=1, description="probability of a straight joint line")
+    sealant: float = Field(0.15, ge=0, le=1, description="probability of a sealant strip")
+    stain: float = Field(0.3, ge=0, le=1, description="probability of stains")
+    marking: float = Field(0.15, ge=0, le=1, description="probability of a painted road marking")
+
+
+class MaterialSection(Section):
+    family: _c(*FAMILIES) = _d(
+        {"choices": list(FAMILIES), "weights": [0.4, 0.3, 0.15, 0.15]}, "material family (blender_assets/materials)"
+    )
+    texture_px: int = Field(1024, ge=16, le=8192, description="texture map resolution per side (px)")
+    hue_shift: _t(-0.5, 0.5) = _d({"min": -0.05, "max": 0.05}, "colour variation (fraction)")
+    value_scale: _t(0, 4, lo_open=True) = _d({"min": 0.8, "max": 1.2}, "albedo brightness multiplier")
+    roughness_offset: _t(-1, 1) = _d({"min": -0.1, "max": 0.1}, "added to the family roughness")
+    crack_darkening: _t(0, 1) = _d({"min": 0.15, "max": 0.45}, "albedo multiplier inside cracks")
+    crack_roughness: _t(0, 1) = _d({"min": 0.8, "max": 1.0}, "roughness inside cracks")
+    distractors: DistractorSection = Field(default_factory=DistractorSection)
+
+
+class LightsSection(Section):
+    count: _t(1, 8, integer=True) = _d({"choices": [1, 2]}, "number of lights (integer)")
+    kind: _c("sun", "area", "spot", "point") = _d(
+        {"choices": ["sun", "area", "spot"], "weights": [0.5, 0.3, 0.2]}, "light type"
+    )
+    elevation_deg: _t(1, 90) = _d({"min": 20, "max": 80}, "light elevation above the surface (deg)")
+    azimuth_deg: _t(-360, 360) = _d({"min": 0, "max": 360}, "light azimuth (deg)")
+    distance_m: _t(0.1, 1000, lo_open=True) = _d({"min": 2.0, "max": 5.0}, "area/spot/point distance to the surface centre (m)")
+    power_w: _t(0, 1e6) = _d({"min": 300, "max": 1500}, "area/spot/point power (W)")
+    sun_irradiance_w_m2: _t(0, 1000) = _d({"min": 2.0, "max": 6.0}, "sun strength (W/m^2, Blender units)")
+    sun_angle_deg: _t(0, 30) = _d({"min": 0.5, "max": 5.0}, "sun angular diameter (deg): shadow softness")
+    size_m: _t(0, 100) = _d({"min": 0.1, "max": 1.0}, "area light size / point+spot radius (m)")
+    spot_angle_deg: _t(1, 180) = _d({"min": 30, "max": 70}, "spot cone angle (deg)")
+    color_temp_k: _t(1000, 40000) = _d({"min": 3500, "max": 7500}, "light colour temperature (K)")
+    ambient_strength: _t(0, 100) = _d({"min": 0.05, "max": 0.4}, "sky/ambient strength (0 = off)")
+    ambient_color_temp_k: _t(1000, 40000) = _d({"min": 5500, "max": 10000}, "sky colour temperature (K)")
+
+
+class ShadowSection(Section):
+    probability: float = Field(0.6, ge=0, le=1, description="chance that a sample has a shadow occluder")
+    pattern: _c("noise", "shapes", "stripes") = _d({"choices": ["noise", "shapes", "stripes"]}, "occluder alpha pattern")
+    height_m: _t(0.01, 100) = _d({"min": 0.2, "max": 0.8}, "occluder distance from the surface along the light (m)")
+    size_m: _t(0.01, 100) = _d({"min": 1.0, "max": 2.5}, "occluder side (m)")
+    coverage: _t(0, 1) = _d({"min": 0.3, "max": 0.7}, "opaque fraction of the occluder")
+    softness: _t(0, 0.5) = _d({"min": 0.0, "max": 0.05}, "edge blur, fraction of occluder size")
+    offset_m: _t(-100, 100) = _d({"min": -0.3, "max": 0.3}, "occluder centre offset across the light ray (m)")
+
+
+class CameraSection(Section):
+    width_px: int = Field(512, ge=8, le=16384, description="RGB image width (px)")
+    height_px: int = Field(512, ge=8, le=16384, description="RGB image height (px)")
+    distance_m: _t(0.05, 100) = _d({"min": 0.6, "max": 1.2}, "camera to look-at point (m)")
+    tilt_deg: _t(0, 80) = _d({"min": 0, "max": 25}, "optical axis vs surface normal (deg)")
+    azimuth_deg: _t(-360, 360) = _d({"min": 0, "max": 360}, "camera azimuth (deg)")
+    roll_deg: _t(-180, 180) = _d({"min": -10, "max": 10}, "roll about the optical axis (deg)")
+    focal_mm: _t(1, 1000) = _d({"min": 24, "max": 40}, "focal length (mm)")
+    sensor_width_mm: float = Field(36.0, gt=0, le=100, description="sensor width (mm)")
+    principal_jitter_px: _t(-1000, 1000) = _d({"min": -4, "max": 4}, "optical-centre jitter (px)")
+    target_jitter_m: _t(-100, 100) = _d({"min": -0.1, "max": 0.1}, "look-at point jitter on the surface (m)")
+
+
+class RenderSection(Section):
+    samples: int = Field(16, ge=1, le=65536, description="Cycles samples per pixel")
+    denoise: bool = Field(True, description="OpenImageDenoise")
+    threads: int = Field(0, ge=0, le=1024, description="Cycles threads (0 = split between workers)")
+    device: str = Field("cpu", pattern="^(cpu|gpu)$", description="cpu | gpu (falls back to cpu with a warning)")
+    max_bounces: int = Field(4, ge=0, le=128, description="Cycles max light bounces")
+
+
+class TofSection(Section):
+    enabled: bool = Field(True, description="simulate the offset ToF camera")
+    width_px: int = Field(320, ge=8, le=4096, description="ToF sensor width (px)")
+    height_px: int = Field(240, ge=8, le=4096, description="ToF sensor height (px)")
+    hfov_deg: float = Field(62.0, gt=1, lt=179, description="ToF horizontal field of view (deg)")
+    vfov_deg: float = Field(49.0, gt=1, lt=179, description="ToF vertical field of view (deg)")
+    offset_x_m: _t(-10, 10) = _d({"min": 0.02, "max": 0.08}, "ToF offset right of the RGB camera (m)")
+    offset_y_m: _t(-10, 10) = _d({"min": -0.01, "max": 0.01}, "ToF offset down from the RGB camera (m)")
+    offset_z_m: _t(-10, 10) = _d({"min": -0.005, "max": 0.005}, "ToF offset forward of the RGB camera (m)")
+    rotation_jitter_deg: _t(-45, 45) = _d({"min": -1.0, "max": 1.0}, "per-axis rotation jitter vs RGB camera (deg)")
+    sigma0_m: float = Field(0.001, ge=0, le=1, description="range noise floor sigma0 (m); 0 = off")
+    k_noise: float = Field(2.4e-6, ge=0, le=1, description="sigma = sigma0 + k*d^2/A (m); 4 mm at 5 m, albedo 0.5")
+    amplitude_scale: float = Field(1.0, gt=0, le=1e6, description="A = scale*albedo*cos(theta)/d^2")
+    min_amplitude: float = Field(0.005, ge=0, le=1e6, description="dropout below this amplitude (0 = off)")
+    grazing_deg: float = Field(80.0, gt=0, le=90, description="dropout beyond this incidence angle (deg; 90 = off)")
+    flying_pixels: bool = Field(True, description="mixed pixels at depth discontinuities")
+    wrap_range_m: float = Field(0.0, ge=0, le=1000, description="phase-wrap (unambiguous) range (m); 0 = off")
+    bias_m: _t(-1, 1) = _d({"min": -0.003, "max": 0.003}, "per-sample range bias (m)")
+
+
+class LidarSection(Section):
+    enabled: bool = Field(True, description="simulate the ring-scanning LiDAR")
+    beams: int = Field(16, ge=1, le=512, description="number of beams (rings)")
+    vfov_min_deg: float = Field(-15.0, ge=-90, le=90, description="lowest beam elevation (deg)")
+    vfov_max_deg: float = Field(15.0, ge=-90, le=90, description="highest beam elevation (deg)")
+    hfov_deg: float = Field(90.0, gt=0, le=360, description="azimuth sweep centred on the optical axis (deg)")
+    azimuth_step_deg: float = Field(0.2, gt=0, le=10, description="azimuth resolution (deg)")
+    max_range_m: float = Field(100.0, gt=0, le=10000, description="maximum range (m)")
+    sigma_m: float = Field(0.02, ge=0, le=10, description="range noise std (m); 0 = off")
+    dropout: float = Field(0.05, ge=0, lt=1, description="random return loss fraction")
+    offset_x_m: _t(-10, 10) = _d({"min": -0.05, "max": 0.05}, "LiDAR offset right of the RGB camera (m)")
+    offset_y_m: _t(-10, 10) = _d({"min": -0.12, "max": -0.06}, "LiDAR offset down from the RGB camera (m)")
+    offset_z_m: _t(-10, 10) = _d(0.0, "LiDAR offset forward of the RGB camera (m)")
+    rotation_jitter_deg: _t(-45, 45) = _d({"min": -1.0, "max": 1.0}, "per-axis rotation jitter (deg)")
+
+    @model_validator(mode="after")
+    def _order(self) -> "LidarSection":
+        if not self.vfov_max_deg > self.vfov_min_deg:
+            raise PydanticCustomError("field_ref", "{sub}: must be > {ref}", {"sub": "vfov_max_deg", "ref": "vfov_min_deg"})
+        return self
+
+
+class StereoSection(Section):
+    enabled: bool = Field(False, description="render a right camera and compute SGBM disparity")
+    baseline_m: _t(0.001, 10) = _d({"min": 0.06, "max": 0.12}, "stereo baseline (m)")
+    num_disparities: int = Field(128, ge=16, le=1024, multiple_of=16, description="SGBM search range (px, x16)")
+    block_size: int = Field(5, ge=1, le=31, description="SGBM block size (odd, px)")
+
+    @model_validator(mode="after")
+    def _odd(self) -> "StereoSection":
+        if self.block_size % 2 == 0:
+            raise PydanticCustomError("field_ref", "{sub}: must be odd", {"sub": "block_size"})
+        return self
+
+
+class Recipe(Section):
+    dataset: DatasetSection = Field(default_factory=DatasetSection)
+    crack: CrackSection = Field(default_factory=CrackSection)
+    surface: SurfaceSection = Field(default_factory=SurfaceSection)
+    material: MaterialSection = Field(default_factory=MaterialSection)
+    lights: LightsSection = Field(default_factory=LightsSection)
+    shadow: ShadowSection = Field(default_factory=ShadowSection)
+    camera: CameraSection = Field(default_factory=CameraSection)
+    render: RenderSection = Field(default_factory=RenderSection)
+    tof: TofSection = Field(default_factory=TofSection)
+    lidar: LidarSection = Field(default_factory=LidarSection)
+    stereo: StereoSection = Field(default_factory=StereoSection)
+
+    # set by load_recipe; not part of the schema
+    _text: str = ""
+
+    @property
+    def text(self) -> str:
+        """The TOML text the recipe came from (stored in the manifest)."""
+        return self._text
+
+    @property
+    def hash(self) -> str:
+        """sha256 of the canonical (defaults filled) recipe, so equivalent files hash alike."""
+        return hashlib.sha256(self.model_dump_json().encode()).hexdigest()
+
+    @property
+    def num_shards(self) -> int:
+        return -(-self.dataset.samples // self.dataset.shard_size)
+
+
+def _format_errors(err: ValidationError) -> list[str]:
+    lines = []
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e["loc"] if not str(p).startswith("function-after"))
+        ctx = e.get("ctx") or {}
+        if e["type"] == "extra_forbidden":
+            lines.append(f"{loc}: unknown key")
+        elif "sub" in ctx:
+            text = e["msg"].split(": ", 1)[1]
+            if "ref" in ctx:
+                text = text.replace(str(ctx["ref"]), f"{loc}.{ctx['ref']}" if loc else str(ctx["ref"]))
+            lines.append(f"{loc + '.' if loc else ''}{ctx['sub']}: {text}")
+        else:
+            lines.append(f"{loc or 'recipe'}: {e['msg']}")
+    return lines
+
+
+def parse_recipe(text: str, source: str = "recipe") -> Recipe:
+    """Validate TOML text; raise RecipeError with one line per problem."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise RecipeError([f"{source}: not valid TOML: {exc}"], source) from None
+    try:
+        recipe = Recipe.model_validate(data)
+    except ValidationError as exc:
+        raise RecipeError(_format_errors(exc), source) from None
+    recipe._text = text
+    return recipe
+
+
+def load_recipe(path: str | Path) -> Recipe:
+    p = Path(path)
+    if not p.is_file():
+        raise RecipeError([f"{p}: recipe file not found"], str(p))
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise RecipeError([f"{p}: cannot read recipe: {exc}"], str(p)) from None
+    return parse_recipe(text, str(p))
+
+
+def summary(recipe: Recipe) -> str:
+    """Human summary for ``crackgen validate``."""
+    d = recipe.dataset
+    lines = [
+        f"dataset {d.name!r}: {d.samples} samples in {recipe.num_shards} shards of {d.shard_size}, seed {d.seed}",
+        f"image {recipe.camera.width_px}x{recipe.camera.height_px} px, {recipe.render.samples} spp "
+        f"({recipe.render.device}, denoise={'on' if recipe.render.denoise else 'off'})",
+        f"sensors: tof={'on' if recipe.tof.enabled else 'off'} "
+        f"({recipe.tof.width_px}x{recipe.tof.height_px}), lidar={'on' if recipe.lidar.enabled else 'off'} "
+        f"({recipe.lidar.beams} beams), stereo={'on' if recipe.stereo.enabled else 'off'}",
+    ]
+    for name in ("crack", "surface", "material", "lights", "shadow", "camera"):
+        sec = getattr(recipe, name)
+        parts = []
+        for key, val in sec:
+            if isinstance(val, Dist):
+                parts.append(f"{key}={val.describe()}")
+        if parts:
+            lines.append(f"  [{name}] " + ", ".join(parts))
+    lines.append(f"recipe hash {recipe.hash[:16]}")
+    return "\n".join(lines)

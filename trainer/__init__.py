@@ -1,0 +1,1 @@
+"""PyTorch sidecar: datasets over shards and real folders, models, training, evaluation, prediction."""
