@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import re
 import tomllib
 from dataclasses import dataclass
@@ -146,9 +147,15 @@ class Family(_Model):
 
 
 def assets_dir() -> Path:
-    """``$CRACKGEN_ASSETS`` or the repo's ``blender_assets/`` next to the package."""
+    """``$CRACKGEN_ASSETS``, the repo's ``blender_assets/`` next to the package (source or
+    editable install), or ``<prefix>/share/crackgen/blender_assets`` (wheel install)."""
     env = os.environ.get(ASSETS_ENV)
-    return Path(env) if env else Path(__file__).resolve().parent.parent / "blender_assets"
+    if env:
+        return Path(env)
+    repo = Path(__file__).resolve().parent.parent / "blender_assets"
+    if repo.is_dir():
+        return repo
+    return Path(sys.prefix) / "share" / "crackgen" / "blender_assets"
 
 
 def list_families() -> list[str]:

@@ -153,7 +153,7 @@ def _d(default: Any, doc: str) -> Any:
     return Field(default_factory=lambda: Dist.model_validate(default), description=doc)
 
 
-FAMILIES = ("asphalt", "concrete", "masonry", "steel")
+FAMILIES = ("asphalt", "concrete", "masonry", "steel", "blockwork")  # = blender_assets/materials/*.toml
 
 
 class DatasetSection(Section):
@@ -188,7 +188,7 @@ class DistractorSection(Section):
 
 class MaterialSection(Section):
     family: _c(*FAMILIES) = _d(
-        {"choices": list(FAMILIES), "weights": [0.4, 0.3, 0.15, 0.15]}, "material family (blender_assets/materials)"
+        {"choices": list(FAMILIES), "weights": [0.4, 0.3, 0.1, 0.1, 0.1]}, "material family (blender_assets/materials)"
     )
     texture_px: int = Field(1024, ge=16, le=8192, description="texture map resolution per side (px)")
     hue_shift: _t(-0.5, 0.5) = _d({"min": -0.05, "max": 0.05}, "colour variation (fraction)")

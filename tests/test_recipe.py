@@ -172,3 +172,10 @@ def test_random_invalid_recipes_are_refused_with_field_name(item):
     sec, _, line, where = item
     lines = problems(f"[{sec}]\n{line}\n")
     assert any(l.startswith(where + ":") for l in lines), (lines, where)
+
+
+def test_recipe_families_match_asset_files():
+    from crackgen.materials import list_families
+    from crackgen.recipe import FAMILIES
+
+    assert sorted(FAMILIES) == list_families()
