@@ -46,14 +46,19 @@ class MeshRaycaster:
         t = ans["t_hit"].numpy().astype(np.float64)
         hit = np.isfinite(t)
         tri = ans["primitive_ids"].numpy().astype(np.int64)
-        tri[~hit] = -1
         bary = ans["primitive_uvs"].numpy().astype(np.float64)
         normals = ans["primitive_normals"].numpy().astype(np.float64)
-        points = np.full((len(t), 3), np.nan)
-        uv = np.full((len(t), 2), np.nan)
-        points[hit] = origins[hit] + directions[hit] * t[hit, None]
-        f = self.faces[tri[hit]]
-        b1, b2 = bary[hit, 0:1], bary[hit, 1:2]
-        uv[hit] = (1.0 - b1 - b2) * self.uvs[f[:, 0]] + b1 * self.uvs[f[:, 1]] + b2 * self.uvs[f[:, 2]]
-        normals[~hit] = np.nan
+        # Gather over all rays (misses use triangle 0, then get NaN): no boolean-mask copies
+        # in the common case where every ray hits, which is ~2x faster for large batches.
+        f = self.faces[np.where(hit, tri, 0)]
+        w = np.stack([1.0 - bary[:, 0] - bary[:, 1], bary[:, 0], bary[:, 1]], axis=1)
+        uv = np.einsum("nk,nkc->nc", w, self.uvs[f])
+        with np.errstate(invalid="ignore"):
+            points = origins + directions * t[:, None]
+        if not hit.all():
+            miss = ~hit
+            tri[miss] = -1
+            points[miss] = np.nan
+            uv[miss] = np.nan
+            normals[miss] = np.nan
         return RayHits(hit=hit, t=t, points=points, normals=normals, uv=uv, triangle=tri)
