@@ -1,0 +1,101 @@
+"""Build sources, sample configs and loaders from parsed CLI arguments.
+
+Shared by ``seg``, ``evaluate``, ``predict``, ``sim2real`` and ``bench`` so
+every command reads folders and depth the same way.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch.utils.data import DataLoader
+
+from trainer.augment import SampleConfig
+from trainer.errors import TrainerInputError
+from trainer.sources import RealFolder, ShardSource, split_fraction
+from trainer.stream import SegStream
+
+
+def add_data_args(p: argparse.ArgumentParser) -> None:
+    """Flags describing real-folder layout and depth handling."""
+    g = p.add_argument_group("real folders and depth")
+    g.add_argument("--image-dir", default="images", help="image subfolder of a real folder")
+    g.add_argument("--mask-dir", default="masks", help="mask subfolder (mask = value > 127)")
+    g.add_argument("--mask-suffix", default="", help="mask file stem = image stem + suffix (e.g. _mask)")
+    g.add_argument("--real-depth-dir", default=None, help="subfolder with depth or disparity maps (same stems)")
+    g.add_argument("--real-depth-kind", choices=("depth", "disparity"), default="depth")
+    g.add_argument("--real-depth-scale", type=float, default=1.0, help="raw depth units -> metres (0.001 for mm PNGs)")
+    g.add_argument("--focal-px", type=float, default=None, help="focal length (px) of the disparity map, for Z=f*B/d")
+    g.add_argument("--baseline-m", type=float, default=None, help="stereo baseline (m), for Z=f*B/d")
+    g.add_argument("--depth", choices=("tof", "lidar", "gt", "none"), default="none",
+                   help="depth input: shard member tof|lidar|depth(gt), or none for RGB-only models")
+    g.add_argument("--valid-channel", action="store_true", help="add a depth-validity channel (5-ch input)")
+    g.add_argument("--depth-near", type=float, default=0.2, help="depth (m) mapped to 0")
+    g.add_argument("--depth-far", type=float, default=5.0, help="depth (m) mapped to 1")
+    g.add_argument("--depth-norm", choices=("fixed", "minmax"), default="fixed")
+    g.add_argument("--size", type=int, default=None, help="resize the shorter image side to this (px) first")
+    g.add_argument("--skip-bad", action="store_true", help="log and skip unreadable/mismatched samples")
+
+
+def channels_from_args(args: argparse.Namespace) -> str:
+    if args.depth == "none":
+        if args.valid_channel:
+            raise TrainerInputError("--valid-channel needs a depth input (--depth tof|lidar|gt)")
+        return "rgb"
+    return "rgbdv" if args.valid_channel else "rgbd"
+
+
+def sample_config_from_args(args: argparse.Namespace) -> SampleConfig:
+    return SampleConfig(
+        channels=channels_from_args(args), near_m=args.depth_near, far_m=args.depth_far,
+        depth_norm=args.depth_norm, crop=getattr(args, "crop", None), size=args.size,
+        rotate_deg=getattr(args, "rotate_deg", 15.0), jitter=getattr(args, "jitter", 0.3),
+    )
+
+
+def real_folder(args: argparse.Namespace, root: str | Path, stems: list[str] | None = None,
+                require_masks: bool = True) -> RealFolder:
+    root = Path(root)
+    if not root.is_dir():
+        raise TrainerInputError(f"real folder {root} does not exist")
+    uses_depth = args.depth != "none"
+    return RealFolder(
+        root, image_dir=args.image_dir, mask_dir=args.mask_dir, mask_suffix=args.mask_suffix,
+        depth_dir=args.real_depth_dir if uses_depth else None, depth_kind=args.real_depth_kind,
+        depth_scale=args.real_depth_scale, focal_px=args.focal_px, baseline_m=args.baseline_m,
+        stems=stems, require_masks=require_masks,
+    )
+
+
+def real_split(args: argparse.Namespace, root: str | Path, fraction: float, seed: int,
+               stems: list[str] | None = None) -> tuple[RealFolder, RealFolder | None]:
+    """(train, held-out) views of one real folder (optionally restricted to ``stems``)."""
+    full = real_folder(args, root, stems)
+    if fraction <= 0:
+        return full, None
+    rest, out = split_fraction(full.keys, fraction, seed)
+    if not rest or not out:
+        raise TrainerInputError(f"{root}: split fraction {fraction} leaves an empty side ({len(full)} images)")
+    return real_folder(args, root, rest), real_folder(args, root, out)
+
+
+def eval_loader(ds: SegStream, workers: int, device: torch.device) -> DataLoader:
+    return DataLoader(ds, batch_size=1, num_workers=workers, pin_memory=device.type == "cuda")
+
+
+def eval_stream(args: argparse.Namespace, cfg: SampleConfig, shards: ShardSource | None,
+                real: RealFolder | None) -> SegStream | None:
+    if shards is None and real is None:
+        return None
+    return SegStream(cfg, shards, real, train=False, seed=args.seed, skip_bad=args.skip_bad)
+
+
+def describe(ds: Any) -> str:
+    parts = []
+    if getattr(ds, "shards", None) is not None:
+        parts.append(f"{len(ds.shards)} synthetic")
+    if getattr(ds, "real", None) is not None:
+        parts.append(f"{len(ds.real)} real x{ds.real_repeat}")
+    return " + ".join(parts)

@@ -1,0 +1,92 @@
+"""``cracktrain``: train, evaluate, predict, compare sim-to-real, split, benchmark.
+
+Every subcommand exits non-zero with a one-line reason on bad input
+(missing folder, no images, unreadable file, bad checkpoint).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from typing import Sequence
+
+from trainer.errors import TrainerInputError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from trainer.bench import add_bench_args
+    from trainer.evaluate import add_eval_args
+    from trainer.predict import add_predict_args
+    from trainer.sim2real import add_sim2real_args
+    from trainer.split import add_split_args
+    from trainer.train import add_seg_args
+
+    p = argparse.ArgumentParser(prog="cracktrain", description="Crack segmentation on synthetic shards and real photos.")
+    p.add_argument("-v", "--verbose", action="store_true")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name, adder, help_ in (
+        ("seg", add_seg_args, "train a segmentation model (thesis defaults: DeepLabV3-R50, Adam 1e-4, batch 16, 30 epochs)"),
+        ("evaluate", add_eval_args, "dataset-level metrics + PR curve of a checkpoint"),
+        ("predict", add_predict_args, "masks, overlays and crack length for real photos"),
+        ("sim2real", add_sim2real_args, "synthetic vs real vs mixed training, evaluated on real test data"),
+        ("split", add_split_args, "deterministic train/test split of a real folder"),
+        ("bench", add_bench_args, "loader samples/s and model step time"),
+    ):
+        adder(sub.add_parser(name, help=help_, description=help_))
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        if args.command == "seg":
+            from trainer.train import train
+
+            import torch.distributed as dist
+
+            res = train(args)
+            if not (dist.is_available() and dist.is_initialized()) or dist.get_rank() == 0:
+                print(json.dumps({k: res[k] for k in ("step", "epoch", "best", "out")}))
+            if dist.is_available() and dist.is_initialized():
+                dist.destroy_process_group()
+        elif args.command == "evaluate":
+            from trainer.evaluate import run_evaluate
+
+            s = run_evaluate(args)
+            a, b = s["at_threshold"], s["best"]
+            print(f"@{a['threshold']:.2f}: acc {a['accuracy']:.4f} P {a['precision']:.4f} R {a['recall']:.4f} F1 {a['f1']:.4f} IoU {a['iou']:.4f}")
+            print(f"best @{b['threshold']:.2f}: acc {b['accuracy']:.4f} P {b['precision']:.4f} R {b['recall']:.4f} F1 {b['f1']:.4f} IoU {b['iou']:.4f}")
+            print(f"wrote {s['out']}/metrics.json and pr_curve.png")
+        elif args.command == "predict":
+            from trainer.predict import run_predict
+
+            reps = run_predict(args)
+            print(f"predicted {len(reps)} image(s) into {args.out}")
+        elif args.command == "sim2real":
+            from trainer.sim2real import run_sim2real
+
+            run_sim2real(args)
+            print((__import__("pathlib").Path(args.out) / "sim2real.md").read_text())
+        elif args.command == "split":
+            from trainer.split import run_split
+
+            s = run_split(args)
+            print(f"{len(s['train'])} train / {len(s['test'])} test -> {args.out}")
+        elif args.command == "bench":
+            from trainer.bench import format_bench, run_bench
+
+            res = run_bench(args)
+            print(json.dumps(res, indent=2) if args.json else format_bench(res))
+    except TrainerInputError as exc:
+        print(f"cracktrain {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"cracktrain {args.command}: interrupted", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,79 @@
+"""``cracktrain evaluate``: thesis 5.4.1 metrics of a checkpoint on a dataset.
+
+Confusion counts are summed over the whole set (not averaged per image);
+reports accuracy/P/R/F1/IoU at ``--threshold`` and at the best-F1 threshold of
+the 0.00..1.00 sweep, and writes ``metrics.json`` + ``pr_curve.png``.
+Depth handling (channels, near/far, normalisation, resize) comes from the
+checkpoint, so evaluation always matches training.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from trainer.augment import SampleConfig
+from trainer.builders import add_data_args, eval_loader, real_folder
+from trainer.checkpoint import load_checkpoint
+from trainer.errors import TrainerInputError
+from trainer.metrics import plot_pr_curve
+from trainer.models import SegModel, build_model
+from trainer.sources import ShardSource
+from trainer.stream import SegStream
+from trainer.train import evaluate_model
+
+
+def add_eval_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--checkpoint", "-c", required=True)
+    p.add_argument("--data", default=None, help="synthetic shards to evaluate on")
+    p.add_argument("--real", default=None, help="real image/mask folder to evaluate on")
+    p.add_argument("--threshold", type=float, default=0.5)
+    p.add_argument("--out", default=None, help="output folder (default: next to the checkpoint)")
+    p.add_argument("--workers", "-j", type=int, default=2)
+    p.add_argument("--device", default=None)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--no-progress", action="store_true")
+    add_data_args(p)
+
+
+def load_model(path: str | Path, device: torch.device) -> tuple[SegModel, SampleConfig, dict[str, Any]]:
+    """Model + the sample config it was trained with, from a cracktrain checkpoint."""
+    ckpt = load_checkpoint(path)
+    cfg = SampleConfig(**{**ckpt["sample_config"], "crop": None})
+    model = build_model(ckpt["args"]["arch"], cfg.in_channels)
+    try:
+        model.load_state_dict(ckpt["model"])
+    except RuntimeError as exc:
+        raise TrainerInputError(f"checkpoint {path}: weights do not fit {ckpt['args']['arch']} ({str(exc)[:120]})") from None
+    return model.to(device).eval(), cfg, ckpt["args"]
+
+
+def _inherit_depth(args: argparse.Namespace, train_args: dict[str, Any], cfg: SampleConfig) -> None:
+    """Depth source and channel count follow the checkpoint (the model needs them)."""
+    args.depth = train_args.get("depth", "none") if cfg.channels != "rgb" else "none"
+    args.valid_channel = cfg.channels == "rgbdv"
+
+
+def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
+    device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    model, cfg, train_args = load_model(args.checkpoint, device)
+    _inherit_depth(args, train_args, cfg)
+    if not args.data and not args.real:
+        raise TrainerInputError("give evaluation data: --data SHARDS and/or --real FOLDER")
+    shards = ShardSource(Path(args.data), args.depth) if args.data else None
+    real = real_folder(args, args.real) if args.real else None
+    ds = SegStream(cfg, shards, real, train=False, seed=args.seed, skip_bad=args.skip_bad)
+    amp = device.type == "cuda"
+    hist = evaluate_model(model, eval_loader(ds, args.workers, device), device, amp, progress=not args.no_progress)
+    summary = hist.summary(args.threshold)
+    out = Path(args.out) if args.out else Path(args.checkpoint).parent / "eval"
+    out.mkdir(parents=True, exist_ok=True)
+    summary["checkpoint"] = str(args.checkpoint)
+    summary["data"] = {"shards": args.data, "real": args.real, "samples": len(ds)}
+    (out / "metrics.json").write_text(json.dumps(summary, indent=2))
+    plot_pr_curve(hist, out / "pr_curve.png", title=f"{train_args['arch']} ({cfg.channels})")
+    summary["out"] = str(out)
+    return summary

@@ -1,0 +1,246 @@
+"""Where samples come from: real image/mask(/depth) folders and synthetic shards.
+
+Both sources hand out the same plain sample dict, so everything after them
+(augmentation, batching, metrics) is source-agnostic::
+
+    {"key": str, "rgb": uint8 HxWx3, "mask": uint8 HxW 0/255,
+     "depth": float32 HxW metres with -1 = none, or None}
+
+Real folders: ``ROOT/images/STEM.jpg`` + ``ROOT/masks/STEM[suffix].png``
+(+ optional ``ROOT/<depth_dir>/STEM.{png,tif,exr,pfm,npy}`` holding depth or
+disparity; see ``trainer.depth`` for the conversion and alignment). Subfolder
+names and the mask suffix are configurable.
+
+Shards: WebDataset tars as written by ``crackgen generate``; the key list of
+each shard is read from the tar headers only (no decoding), so splits and
+per-worker quotas are known before any pixel is decoded.
+"""
+from __future__ import annotations
+
+import hashlib
+import logging
+import tarfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterator, Sequence
+
+import numpy as np
+
+from trainer.depth import align_to_rgb, disparity_to_depth, scaled_depth
+from trainer.errors import TrainerInputError
+from trainer.imageio import DEPTH_EXTS, IMAGE_EXTS, read_float_map, read_mask, read_rgb
+
+log = logging.getLogger(__name__)
+
+DEPTH_SOURCES = ("tof", "lidar", "gt", "none")
+_SHARD_MEMBER = {"tof": "tof", "lidar": "lidar", "gt": "depth"}
+
+
+def split_fraction(names: Sequence[str], fraction: float, seed: int) -> tuple[list[str], list[str]]:
+    """Deterministic (rest, held_out) split of a name list: seeded permutation of the sorted names.
+
+    The result depends only on the set of names, the fraction and the seed,
+    never on file-system order.
+    """
+    if not 0.0 <= fraction < 1.0:
+        raise TrainerInputError(f"split fraction must be in [0, 1), got {fraction}")
+    ordered = sorted(names)
+    perm = np.random.default_rng(np.random.SeedSequence([seed, 0x5EED])).permutation(len(ordered))
+    n_out = int(round(fraction * len(ordered)))
+    out = sorted(ordered[i] for i in perm[:n_out])
+    rest = sorted(ordered[i] for i in perm[n_out:])
+    return rest, out
+
+
+def key_in_val(key: str, fraction: float, seed: int) -> bool:
+    """Streaming-friendly split: a key is validation when its seeded hash < fraction."""
+    h = hashlib.blake2b(f"{seed}:{key}".encode(), digest_size=8).digest()
+    return int.from_bytes(h, "little") / 2.0**64 < fraction
+
+
+# --------------------------------------------------------------------- real folders
+
+@dataclass
+class RealFolder:
+    """A folder of real photos + masks (+ optional depth/disparity maps).
+
+    ``stems`` restricts the folder to a subset (e.g. one side of a split).
+    ``depth_kind`` is "depth" (raw * ``depth_scale`` = metres) or "disparity"
+    (metres = ``focal_px * baseline_m / d``).
+    """
+
+    root: Path
+    image_dir: str = "images"
+    mask_dir: str = "masks"
+    mask_suffix: str = ""
+    depth_dir: str | None = None
+    depth_kind: str = "depth"
+    depth_scale: float = 1.0
+    focal_px: float | None = None
+    baseline_m: float | None = None
+    stems: Sequence[str] | None = None
+    require_masks: bool = True
+    _images: dict[str, Path] = field(default_factory=dict, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.root = Path(self.root)
+        img_root = self.root / self.image_dir
+        if not img_root.is_dir():
+            raise TrainerInputError(f"real folder {self.root}: no '{self.image_dir}/' subfolder")
+        found = {p.stem: p for p in sorted(img_root.iterdir()) if p.suffix.lower() in IMAGE_EXTS}
+        if self.stems is not None:
+            missing = sorted(set(self.stems) - set(found))
+            if missing:
+                raise TrainerInputError(f"{img_root}: no image for stems {missing[:5]}")
+            found = {s: found[s] for s in sorted(self.stems)}
+        if not found:
+            raise TrainerInputError(f"{img_root}: no images ({', '.join(IMAGE_EXTS)})")
+        self._images = found
+        if self.require_masks and not (self.root / self.mask_dir).is_dir():
+            raise TrainerInputError(f"real folder {self.root}: no '{self.mask_dir}/' subfolder")
+        if self.depth_dir is not None and not (self.root / self.depth_dir).is_dir():
+            raise TrainerInputError(f"real folder {self.root}: no '{self.depth_dir}/' subfolder")
+        if self.depth_kind not in ("depth", "disparity"):
+            raise TrainerInputError(f"depth_kind must be 'depth' or 'disparity', got {self.depth_kind!r}")
+        if self.depth_kind == "disparity" and self.depth_dir and not (self.focal_px and self.baseline_m):
+            raise TrainerInputError("disparity maps need --focal-px and --baseline-m (Z = f*B/d)")
+
+    @property
+    def keys(self) -> list[str]:
+        return list(self._images)
+
+    def __len__(self) -> int:
+        return len(self._images)
+
+    def _find(self, folder: str, stem: str, exts: Sequence[str]) -> Path:
+        for ext in exts:
+            for e in (ext, ext.upper()):
+                p = self.root / folder / f"{stem}{e}"
+                if p.is_file():
+                    return p
+        raise TrainerInputError(f"{self.root / folder}: no file for '{stem}' ({', '.join(exts)})")
+
+    def mask_path(self, stem: str) -> Path:
+        return self._find(self.mask_dir, stem + self.mask_suffix, (".png", ".bmp", ".jpg", ".tif", ".tiff"))
+
+    def load(self, stem: str) -> dict[str, Any]:
+        """Decode one sample; raises TrainerInputError naming the bad file."""
+        img_path = self._images[stem]
+        rgb = read_rgb(img_path)
+        mask = None
+        if self.require_masks:
+            mp = self.mask_path(stem)
+            mask = read_mask(mp)
+            if mask.shape != rgb.shape[:2]:
+                raise TrainerInputError(f"{mp}: mask size {mask.shape[::-1]} != image size {rgb.shape[1::-1]} ({img_path.name})")
+        depth = None
+        if self.depth_dir is not None:
+            dp = self._find(self.depth_dir, stem, DEPTH_EXTS)
+            raw = read_float_map(dp)
+            if self.depth_kind == "disparity":
+                depth = disparity_to_depth(raw, float(self.focal_px), float(self.baseline_m))
+            else:
+                depth = scaled_depth(raw, self.depth_scale)
+            depth = align_to_rgb(depth, rgb.shape[:2])
+        return {"key": stem, "rgb": rgb, "mask": mask, "depth": depth, "path": str(img_path)}
+
+
+# --------------------------------------------------------------------- shards
+
+def list_shards(path: str | Path) -> list[Path]:
+    """Finished shard tars of a dataset dir (manifest order), or a single tar."""
+    from crackgen.shards import list_shards as _list  # pure-Python reader
+
+    p = Path(path)
+    if not p.exists():
+        raise TrainerInputError(f"shard path {p} does not exist")
+    try:
+        found = [Path(u) for u in _list(str(p))]
+    except Exception as exc:  # ShardError/ManifestError: name the folder
+        raise TrainerInputError(f"{p}: {exc}") from None
+    if not found:
+        raise TrainerInputError(f"{p}: no finished shard-*.tar files")
+    return found
+
+
+def shard_keys(shard: Path) -> list[str]:
+    """Sample keys of one shard from the tar headers (no member is decoded)."""
+    keys: dict[str, None] = {}
+    try:
+        with tarfile.open(shard, "r:") as tf:
+            for m in tf:
+                if m.isfile():
+                    keys.setdefault(m.name.rsplit("/", 1)[-1].split(".", 1)[0], None)
+    except (OSError, tarfile.TarError) as exc:
+        raise TrainerInputError(f"cannot read shard {shard}: {exc}") from None
+    return list(keys)
+
+
+def iter_shard(shard: Path, members: Sequence[str], keys: set[str] | None = None) -> Iterator[dict[str, Any]]:
+    """Decoded samples of one shard via ``crackgen.shards.iter_samples`` (keys outside ``keys`` are not decoded)."""
+    from crackgen.shards import iter_samples  # pure-Python reader; imported lazily
+
+    yield from iter_samples(str(shard), keys=keys, members=list(members))
+
+
+@dataclass
+class ShardSource:
+    """Synthetic shards with a chosen depth member and a key-hash validation split."""
+
+    path: Path
+    depth: str = "tof"
+    val_fraction: float = 0.0
+    split: str = "all"  # all | train | val
+    seed: int = 0
+    shards: list[Path] = field(default_factory=list, init=False)
+    shard_keys: list[list[str]] = field(default_factory=list, init=False)
+
+    def __post_init__(self) -> None:
+        if self.depth not in DEPTH_SOURCES:
+            raise TrainerInputError(f"--depth must be one of {DEPTH_SOURCES}, got {self.depth!r}")
+        self.shards = list_shards(self.path)
+        for s in self.shards:
+            keys = shard_keys(s)
+            if self.split != "all":
+                want_val = self.split == "val"
+                keys = [k for k in keys if key_in_val(k, self.val_fraction, self.seed) == want_val]
+            self.shard_keys.append(keys)
+        if sum(map(len, self.shard_keys)) == 0:
+            raise TrainerInputError(f"{self.path}: no samples in the '{self.split}' split")
+
+    def __len__(self) -> int:
+        return sum(map(len, self.shard_keys))
+
+    @property
+    def members(self) -> list[str]:
+        m = ["rgb", "mask"]
+        if self.depth != "none":
+            m.append(_SHARD_MEMBER[self.depth])
+        return m
+
+    def iter_shard(self, idx: int, keys: set[str] | None = None) -> Iterator[dict[str, Any]]:
+        """Samples of shard ``idx`` (restricted to ``keys``) in the trainer's dict form."""
+        shard = self.shards[idx]
+        allowed = set(self.shard_keys[idx]) if keys is None else keys
+        dm = _SHARD_MEMBER.get(self.depth)
+        try:
+            for s in iter_shard(shard, self.members, allowed):
+                key = s["__key__"]
+                if key not in allowed:
+                    continue
+                if "rgb" not in s or "mask" not in s or (dm and dm not in s):
+                    raise TrainerInputError(f"{shard}: sample {key} lacks one of {self.members}")
+                mask = np.asarray(s["mask"])
+                if mask.ndim == 3:
+                    mask = mask[..., 0]
+                depth = None
+                if dm:
+                    depth = np.asarray(s[dm], dtype=np.float32)
+                    if depth.shape != mask.shape:
+                        raise TrainerInputError(f"{shard}: sample {key} {dm} size {depth.shape} != mask size {mask.shape}")
+                yield {"key": key, "rgb": np.asarray(s["rgb"])[..., :3], "mask": np.where(mask > 127, 255, 0).astype(np.uint8),
+                       "depth": depth, "path": f"{shard}:{key}"}
+        except TrainerInputError:
+            raise
+        except Exception as exc:  # corrupt tar/member: name the shard
+            raise TrainerInputError(f"cannot decode shard {shard}: {exc}") from None
