@@ -1,0 +1,137 @@
+"""LiveScene: the worker's one Blender scene, built once and updated per sample.
+
+Why: a factory reset, node-tree build or datablock creation per sample costs time
+and leaks memory over thousands of samples. The scene is reset once at build; each
+``update`` only writes vertex positions, image pixels, light/camera/occluder
+parameters and render settings, so ``bpy.data`` counts and RSS stay flat.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+from crackgen.blender.camera import apply_camera
+from crackgen.blender.lights import LightPool, Sky
+from crackgen.blender.render import RenderSettings, Renderer, apply_settings, configure_scene, linear_to_srgb8, select_device
+from crackgen.blender.shadow import ShadowOccluder
+from crackgen.blender.surface import LiveSurface, MapsLike
+from crackgen.rig import Rig
+from crackgen.spec import SampleSpec
+
+
+class SceneUpdateError(ValueError):
+    """A sample that does not fit the live scene (names the field)."""
+
+
+@dataclass
+class RenderOutput:
+    rgb: np.ndarray  # (H,W,3) uint8 sRGB, row 0 = top
+    depth: np.ndarray  # (H,W) float32 planar z (m), -1 = background; one jittered sample per pixel
+    right_rgb: np.ndarray | None = None
+    right_depth: np.ndarray | None = None
+    rgb_linear: np.ndarray | None = None  # (H,W,3) float32 scene-linear, before the sRGB curve
+    meta: dict = field(default_factory=dict)  # device, light colours, occluder pose, timings (s)
+
+
+class LiveScene:
+    """Headless Cycles scene: surface, lights, sky, shadow occluder, RGB (+ right) camera."""
+
+    def __init__(
+        self,
+        grid_px: int,
+        texture_px: int,
+        width: int,
+        height: int,
+        stereo: bool = False,
+        threads: int = 0,
+        device: str = "cpu",
+        samples: int = 16,
+        denoise: bool = True,
+        max_bounces: int = 4,
+        max_lights: int = 8,
+        shadow_px: int = 256,
+        filter_width_px: float = 1.5,
+    ):
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        self.scene = bpy.context.scene
+        configure_scene(self.scene, width, height)
+        self.device = select_device(self.scene, device)
+        self.defaults = RenderSettings(samples, denoise, threads, device, max_bounces, 0, filter_width_px)
+        self.filter_width_px = float(filter_width_px)  # Cycles pixel filter; public, applied at the next update()
+        self.surface = LiveSurface(self.scene, grid_px, texture_px)
+        self.lights = LightPool(self.scene, max_lights)
+        self.sky = Sky(self.scene)
+        self.occluder = ShadowOccluder(self.scene, shadow_px)
+        self.camera = self._camera("crackgen_rgb")
+        self.right = self._camera("crackgen_right") if stereo else None
+        self.renderer = Renderer(self.scene)
+        self._has_right = False  # whether the last update posed the right camera
+        self.scene.camera = self.camera
+        apply_settings(self.scene, self.defaults)
+
+    def _camera(self, name: str) -> bpy.types.Object:
+        data = bpy.data.cameras.new(name)
+        data.clip_start = 0.001
+        data.clip_end = 10000.0
+        obj = bpy.data.objects.new(name, data)
+        self.scene.collection.objects.link(obj)
+        return obj
+
+    @property
+    def shadow_px(self) -> int:
+        return self.occluder.px
+
+    def datablock_counts(self) -> dict[str, int]:
+        """Sizes of the bpy.data collections a leak would grow (checked by the tests)."""
+        d = bpy.data
+        return {k: len(getattr(d, k)) for k in ("objects", "meshes", "materials", "images", "lights", "cameras", "worlds", "node_groups")}
+
+    def update(self, spec: SampleSpec, rig: Rig, vertices: np.ndarray, maps: MapsLike, shadow_alpha: np.ndarray | None) -> dict:
+        """Write one sample into the scene; returns metadata (light colours, occluder pose).
+
+        ``vertices``: (grid_px^2, 3) from ``crackgen.surface.surface_vertices``; ``maps``: the
+        sample's ``MaterialMaps``; ``shadow_alpha``: (shadow_px, shadow_px) from
+        ``crackgen.shadow_pattern.shadow_alpha`` (ignored when ``spec.shadow.enabled`` is False).
+        Render settings (samples, denoise, threads, bounces, Cycles seed) come from
+        ``spec.render``; the device was chosen once at build.
+        """
+        sc = self.scene
+        c = spec.camera
+        if (rig.rgb.width, rig.rgb.height) != (c.width_px, c.height_px):
+            raise SceneUpdateError(f"rig.rgb is {rig.rgb.width}x{rig.rgb.height} but camera spec is {c.width_px}x{c.height_px}")
+        sc.render.resolution_x, sc.render.resolution_y = int(c.width_px), int(c.height_px)
+        self.surface.update(vertices, maps)
+        light_meta = self.lights.update(spec.lights)
+        self.sky.update(spec.ambient)
+        occ = self.occluder.update(spec.shadow, spec.lights, shadow_alpha)
+        apply_camera(self.camera, rig.rgb)
+        if rig.right is not None:
+            if self.right is None:
+                raise SceneUpdateError("rig has a right camera but the LiveScene was built with stereo=False")
+            apply_camera(self.right, rig.right)
+        r = spec.render
+        apply_settings(sc, RenderSettings(r.samples, r.denoise, r.threads, r.device, r.max_bounces, r.seed, self.filter_width_px))
+        self._has_right = rig.right is not None
+        return {"device": self.device, "lights": light_meta, "occluder_matrix": None if occ is None else occ.tolist()}
+
+    def render(self, linear: bool = False) -> RenderOutput:
+        """Render the RGB view (and the right view when the last update had one)."""
+        t0 = time.perf_counter()
+        lin, depth = self.renderer.render(self.camera)
+        out = RenderOutput(rgb=linear_to_srgb8(lin), depth=depth, rgb_linear=lin if linear else None)
+        out.meta.update(self.renderer.last_times)
+        out.meta["render_s"] = time.perf_counter() - t0
+        if self._has_right:
+            t1 = time.perf_counter()
+            lin_r, depth_r = self.renderer.render(self.right)
+            out.right_rgb, out.right_depth = linear_to_srgb8(lin_r), depth_r
+            out.meta["render_right_s"] = time.perf_counter() - t1
+            self.scene.camera = self.camera
+        out.meta["device"] = self.device
+        return out
+
+    def close(self) -> None:
+        self.renderer.close()
