@@ -207,7 +207,10 @@ class LightsSection(Section):
     elevation_deg: _t(1, 90) = _d({"min": 20, "max": 80}, "light elevation above the surface (deg)")
     azimuth_deg: _t(-360, 360) = _d({"min": 0, "max": 360}, "light azimuth (deg)")
     distance_m: _t(0.1, 1000, lo_open=True) = _d({"min": 2.0, "max": 5.0}, "area/spot/point distance to the surface centre (m)")
-    power_w: _t(0, 1e6) = _d({"min": 300, "max": 1500}, "area/spot/point power (W)")
+    irradiance_w_m2: _t(0, 1000) = _d(
+        {"min": 2.0, "max": 6.0},
+        "area/spot/point irradiance at the surface centre (W/m^2); power = E*4*pi*d^2 (point, spot) or E*pi*d^2 (area)",
+    )
     sun_irradiance_w_m2: _t(0, 1000) = _d({"min": 2.0, "max": 6.0}, "sun strength (W/m^2, Blender units)")
     sun_angle_deg: _t(0, 30) = _d({"min": 0.5, "max": 5.0}, "sun angular diameter (deg): shadow softness")
     size_m: _t(0, 100) = _d({"min": 0.1, "max": 1.0}, "area light size / point+spot radius (m)")

@@ -223,6 +223,14 @@ def _from_dict(tp: Any, value: Any) -> Any:
     return value
 
 
+def local_light_power(kind: str, irradiance_w_m2: float, distance_m: float) -> float:
+    """Blender power (W) giving ``irradiance_w_m2`` on-axis at ``distance_m``, so every light kind
+    is as bright as a sun of the same strength (point/spot radiate over 4*pi sr, an area light
+    is a Lambertian emitter: pi)."""
+    solid = math.pi if kind == "area" else 4.0 * math.pi
+    return float(irradiance_w_m2 * solid * distance_m**2)
+
+
 def sample_rng(recipe_seed: int, index: int) -> np.random.Generator:
     """The one Generator a sample's draws come from."""
     return np.random.default_rng(np.random.SeedSequence([int(recipe_seed), int(index)]))
@@ -287,7 +295,7 @@ def make_spec(recipe: "Recipe", index: int) -> SampleSpec:  # noqa: F821
             )
         )
         L = lights[-1]
-        L.intensity = li.sun_irradiance_w_m2.draw(rng) if L.kind == "sun" else li.power_w.draw(rng)
+        L.intensity = li.sun_irradiance_w_m2.draw(rng) if L.kind == "sun" else local_light_power(L.kind, li.irradiance_w_m2.draw(rng), L.distance_m)
         if L.kind == "sun":
             L.size_m = rad(li.sun_angle_deg.draw(rng))
     ambient = AmbientSpec(strength=li.ambient_strength.draw(rng), color_temp_k=li.ambient_color_temp_k.draw(rng))
