@@ -103,11 +103,6 @@ class SampleProducer:
                 max_lights=int(max(v for v in r.lights.count.support())),
                 shadow_px=SHADOW_PX,
             )
-            # Cycles persistent data kept the previous sample's texture pixels (image
-            # update_tag was not enough in bpy 4.5.15): a sample's RGB then depended on
-            # which samples the process rendered before it, breaking determinism across
-            # worker counts. Re-syncing per render costs little next to path tracing.
-            self._scene.scene.render.use_persistent_data = False
         return self._scene
 
     def close(self) -> None:
@@ -168,7 +163,8 @@ class SampleProducer:
             with tm.stage("tof"):
                 tof = simulate_tof(spec.tof, rig, caster, albedo_from_map(maps.albedo), sensor_rng(spec.tof.seed))
             members["tof.exr"] = tof.depth_rgb
-            members["tofraw.exr"] = {"Z": tof.depth_m, "A": tof.amplitude}
+            # native sensor image: Z = measured radial range (m, -1 none), A = amplitude
+            members["tofraw.exr"] = {"Z": tof.range_m, "A": tof.amplitude}
             sensors["tof"] = {"fill_rgb": fill_ratio(tof.depth_rgb), "valid": float(tof.valid.mean()),
                               "mixed": int(tof.mixed.sum())}
         if spec.lidar.enabled:
@@ -187,6 +183,9 @@ class SampleProducer:
             members["right.png"] = out.right_rgb
             members["disp_sgm.exr"] = st.disp_sgm
             members["disp_gt.exr"] = st.disp_gt
+            if st.disp_tof is not None:  # SYNTH3-style fusion inputs in the left view
+                members["disp_tof.exr"] = st.disp_tof
+                members["tofamp.exr"] = st.tof_amplitude
             sensors["stereo"] = {"fill_sgm": fill_ratio(st.disp_sgm), "fill_gt": fill_ratio(st.disp_gt)}
 
         valid = (gt.depth > 0) & (out.depth > 0)

@@ -63,7 +63,7 @@ _ZERO_BLOCK = bytes(tarfile.BLOCKSIZE)
 # Members that live in the RGB camera's pixel grid and so must share its H×W.
 _VIEW_MEMBERS = ("rgb", "mask", "depth", "tof", "lidar", "right", "disp_sgm", "disp_gt")
 _RGB_MEMBERS = ("rgb", "right")
-_FLOAT_MEMBERS = ("depth", "tof", "lidar", "disp_sgm", "disp_gt", "crackmap")
+_FLOAT_MEMBERS = ("depth", "tof", "lidar", "disp_sgm", "disp_gt", "disp_tof", "tofamp", "crackmap")
 
 
 class ShardError(ValueError):
