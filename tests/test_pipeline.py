@@ -55,15 +55,22 @@ def test_members_follow_the_contract(produced):
     _, samples, _ = produced
     m = samples[0].members
     assert set(m) == {"rgb.png", "mask.png", "depth.exr", "crackmap.exr", "tof.exr", "tofraw.exr", "lidar.exr",
-                      "right.png", "disp_sgm.exr", "disp_gt.exr"}
+                      "right.png", "disp_sgm.exr", "disp_gt.exr", "disp_tof.exr", "tofamp.exr"}
     assert m["rgb.png"].shape == (60, 80, 3) and m["rgb.png"].dtype == np.uint8
     assert m["right.png"].shape == (60, 80, 3)
     assert m["mask.png"].dtype == np.uint8 and set(np.unique(m["mask.png"])) <= {0, 255}
-    for k in ("depth.exr", "tof.exr", "lidar.exr", "disp_sgm.exr", "disp_gt.exr"):
+    for k in ("depth.exr", "tof.exr", "lidar.exr", "disp_sgm.exr", "disp_gt.exr", "disp_tof.exr"):
         a = m[k]
         assert a.shape == (60, 80) and a.dtype == np.float32, k
         assert np.all((a > 0) | (a == -1)), f"{k}: no-value must be exactly -1"
     assert m["tofraw.exr"]["Z"].shape == (30, 40) and m["tofraw.exr"]["A"].shape == (30, 40)
+    # SYNTH3 fusion inputs: ToF disparity is f*B/Z of ToF points in the left view
+    meta = samples[0].meta
+    f = meta["cameras"]["rgb"]["K"][0][0]
+    B = meta["spec"]["camera"]["baseline_m"]
+    ok = m["disp_tof.exr"] > 0
+    assert ok.mean() > 0.05 and ((m["tofamp.exr"] > 0) == ok).all()
+    np.testing.assert_allclose(m["disp_tof.exr"][ok], f * B / m["tof.exr"][ok], rtol=1e-4)
 
 
 def test_meta_has_spec_cameras_and_timings(produced):
