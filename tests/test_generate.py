@@ -23,39 +23,11 @@ from crackgen.generate import GenerateOptions, ShardTask, generate, plan_shards,
 from crackgen.manifest import Manifest
 from crackgen.recipe import parse_recipe
 from crackgen.shards import iter_samples, verify_dataset
+from tiny_recipes import tiny_recipe
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 
-TINY = """
-[dataset]
-name = "tiny"
-seed = 11
-samples = 6
-shard_size = 2
-[surface]
-size_m = { min = 1.6, max = 2.0 }
-grid_px = 48
-crackmap_px = 128
-[material]
-texture_px = 64
-[camera]
-width_px = 64
-height_px = 48
-distance_m = { min = 0.7, max = 0.9 }
-[render]
-samples = 2
-denoise = false
-max_bounces = 1
-[tof]
-width_px = 32
-height_px = 24
-[lidar]
-beams = 8
-azimuth_step_deg = 1.0
-[stereo]
-enabled = true
-num_disparities = 16
-"""
+TINY = tiny_recipe(11, name="tiny", samples=6, shard_size=2, spp=2, stereo=True)
 COMPARE = ("mask", "depth", "tof", "tofraw", "lidar", "disp_gt", "crackmap", "rgb", "right", "disp_sgm")
 
 

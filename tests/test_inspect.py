@@ -11,33 +11,10 @@ import numpy as np
 import pytest
 
 from crackgen.inspect import colorize_depth, contact_sheet, write_gallery
+from tiny_recipes import tiny_recipe
 
 CHROMIUM = "/usr/bin/chromium"
-RECIPE = """
-[dataset]
-seed = 5
-[surface]
-grid_px = 48
-crackmap_px = 128
-[material]
-texture_px = 64
-[camera]
-width_px = 64
-height_px = 48
-[render]
-samples = 1
-denoise = false
-max_bounces = 1
-[tof]
-width_px = 32
-height_px = 24
-[lidar]
-beams = 8
-azimuth_step_deg = 1.0
-[stereo]
-enabled = true
-num_disparities = 16
-"""
+RECIPE = tiny_recipe(5, near_camera=False, stereo=True)
 
 
 @pytest.fixture(scope="module")

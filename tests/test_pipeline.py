@@ -8,37 +8,11 @@ from crackgen.pipeline import STAGES, SampleProducer
 from crackgen.recipe import parse_recipe
 from crackgen.rig import make_rig
 from crackgen.spec import make_spec
+from tiny_recipes import tiny_recipe
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 
-RECIPE = """
-[dataset]
-seed = 3
-[surface]
-size_m = { min = 1.6, max = 2.0 }
-grid_px = 64
-crackmap_px = 128
-[material]
-texture_px = 64
-[camera]
-width_px = 80
-height_px = 60
-distance_m = { min = 0.7, max = 0.9 }
-[render]
-samples = 2
-denoise = false
-max_bounces = 1
-[tof]
-width_px = 40
-height_px = 30
-flying_pixels = false
-[lidar]
-beams = 8
-azimuth_step_deg = 1.0
-[stereo]
-enabled = true
-num_disparities = 16
-"""
+RECIPE = tiny_recipe(3, width=80, height=60, grid_px=64, spp=2, tof_px=(40, 30), flying_pixels=False, stereo=True)
 
 
 @pytest.fixture(scope="module")

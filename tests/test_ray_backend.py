@@ -10,34 +10,11 @@ import socket
 
 import numpy as np
 import pytest
+from tiny_recipes import tiny_recipe
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 
-RECIPE = """
-[dataset]
-seed = 21
-samples = 4
-shard_size = 2
-[surface]
-size_m = { min = 1.6, max = 2.0 }
-grid_px = 48
-crackmap_px = 128
-[material]
-texture_px = 64
-[camera]
-width_px = 64
-height_px = 48
-distance_m = { min = 0.7, max = 0.9 }
-[render]
-samples = 1
-denoise = false
-max_bounces = 1
-[tof]
-width_px = 32
-height_px = 24
-[lidar]
-enabled = false
-"""
+RECIPE = tiny_recipe(21, samples=4, shard_size=2, lidar=False)
 
 
 def _free_port() -> int:

@@ -5,28 +5,9 @@ import numpy as np
 import pytest
 
 from crackgen.show import ShowError, sample_cloud, show, splat_render
+from tiny_recipes import tiny_recipe
 
-RECIPE = """
-[dataset]
-seed = 9
-[surface]
-grid_px = 48
-crackmap_px = 128
-[material]
-texture_px = 64
-[camera]
-width_px = 64
-height_px = 48
-[render]
-samples = 1
-denoise = false
-max_bounces = 1
-[tof]
-width_px = 32
-height_px = 24
-[lidar]
-enabled = false
-"""
+RECIPE = tiny_recipe(9, near_camera=False, lidar=False)
 
 
 @pytest.fixture(scope="module")
