@@ -21,7 +21,7 @@ from crackgen.noise import fbm
 from crackgen.spec import CrackSpec
 from fusion.crack_length import crack_length, skeleton
 
-__all__ = ["CrackMapError", "CrackMap", "crack_map", "texel_centres", "mask_at_uv", "depth_at_uv"]
+__all__ = ["CrackMapError", "CrackMap", "crack_map", "texel_centres", "mask_at_uv", "nearest_texel", "depth_at_uv"]
 
 
 class CrackMapError(ValueError):
@@ -105,10 +105,15 @@ def mask_at_uv(cm: CrackMap, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     v = np.asarray(v, dtype=np.float64)
     if u.shape != v.shape:
         raise CrackMapError(f"u and v must have the same shape, got {u.shape} and {v.shape}")
-    n = cm.size_px
-    i = np.clip(np.floor(u * n), 0, n - 1).astype(np.intp)
-    j = np.clip(np.floor(v * n), 0, n - 1).astype(np.intp)
-    return cm.mask[j, i]
+    return nearest_texel(cm.mask, u, v)
+
+
+def nearest_texel(texels: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``texels[j, i]`` of the texel containing (u, v), clamped at the edges (the one UV->texel rule)."""
+    n_v, n_u = texels.shape[:2]
+    i = np.clip(np.floor(u * n_u), 0, n_u - 1).astype(np.intp)
+    j = np.clip(np.floor(v * n_v), 0, n_v - 1).astype(np.intp)
+    return texels[j, i]
 
 
 def depth_at_uv(cm: CrackMap, u: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from crackgen.crackmap import nearest_texel
 from crackgen.raycast import MeshRaycaster, RayHits
 from fusion.camera import Camera
 
@@ -25,11 +26,9 @@ class ViewGroundTruth:
 
 def mask_lookup(crack_mask: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """Nearest-texel crack mask at UVs (crack-map convention: [j, i], i along u, row 0 at v = 0)."""
-    n_v, n_u = crack_mask.shape
     ok = np.isfinite(uv).all(axis=-1)
-    i = np.clip(np.floor(np.nan_to_num(uv[..., 0]) * n_u).astype(np.int64), 0, n_u - 1)
-    j = np.clip(np.floor(np.nan_to_num(uv[..., 1]) * n_v).astype(np.int64), 0, n_v - 1)
-    return crack_mask[j, i] & ok
+    uv = np.nan_to_num(uv)
+    return nearest_texel(crack_mask, uv[..., 0], uv[..., 1]) & ok
 
 
 def view_ground_truth(camera: Camera, caster: MeshRaycaster, crack_mask: np.ndarray) -> ViewGroundTruth:
