@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from crackgen.raycast import MeshRaycaster
-from crackgen.rig import Rig
-from crackgen.spec import LidarSpec, TofSpec
+from crackgen.sim.raycast import MeshRaycaster
+from crackgen.sim.rig import Rig
+from crackgen.config.spec import LidarSpec, TofSpec
 from fusion.camera import Camera, intrinsics_from_fov, look_at, mounted_pose
 
 
@@ -70,7 +70,7 @@ def lidar_spec(**kw) -> LidarSpec:
 
 
 def make_test_rig(rgb: Camera, tof: TofSpec | None = None, lidar: LidarSpec | None = None, baseline_m: float = 0.0) -> Rig:
-    """Rig with sensors mounted on ``rgb`` exactly as ``crackgen.rig.make_rig`` mounts them."""
+    """Rig with sensors mounted on ``rgb`` exactly as ``crackgen.sim.rig.make_rig`` mounts them."""
     tof_cam = None
     if tof is not None:
         tof_cam = Camera(
@@ -86,7 +86,7 @@ def make_test_rig(rgb: Camera, tof: TofSpec | None = None, lidar: LidarSpec | No
 
 def tilted_camera(distance_m: float, tilt_deg: float, width: int, height: int, hfov_deg: float) -> Camera:
     """Camera looking at the origin from ``distance_m``, optical axis ``tilt_deg`` off the plane normal
-    (towards -y); near ground at the bottom of the image, like ``crackgen.rig.rgb_camera``."""
+    (towards -y); near ground at the bottom of the image, like ``crackgen.sim.rig.rgb_camera``."""
     t = np.radians(tilt_deg)
     eye = np.array([0.0, -np.sin(t), np.cos(t)]) * distance_m
     vfov = np.degrees(2 * np.arctan(np.tan(np.radians(hfov_deg) / 2) * height / width))

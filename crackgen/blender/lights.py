@@ -16,7 +16,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from crackgen.spec import AmbientSpec, LightSpec
+from crackgen.config.spec import AmbientSpec, LightSpec
 
 LIGHT_KINDS = ("sun", "area", "spot", "point")
 

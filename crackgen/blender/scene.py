@@ -18,8 +18,8 @@ from crackgen.blender.lights import LightPool, Sky
 from crackgen.blender.render import RenderSettings, Renderer, apply_settings, configure_scene, linear_to_srgb8, select_device
 from crackgen.blender.shadow import ShadowOccluder
 from crackgen.blender.surface import LiveSurface, MapsLike
-from crackgen.rig import Rig
-from crackgen.spec import SampleSpec
+from crackgen.sim.rig import Rig
+from crackgen.config.spec import SampleSpec
 
 
 class SceneUpdateError(ValueError):
@@ -92,9 +92,9 @@ class LiveScene:
     def update(self, spec: SampleSpec, rig: Rig, vertices: np.ndarray, maps: MapsLike, shadow_alpha: np.ndarray | None) -> dict:
         """Write one sample into the scene; returns metadata (light colours, occluder pose).
 
-        ``vertices``: (grid_px^2, 3) from ``crackgen.surface.surface_vertices``; ``maps``: the
+        ``vertices``: (grid_px^2, 3) from ``crackgen.procedural.surface.surface_vertices``; ``maps``: the
         sample's ``MaterialMaps``; ``shadow_alpha``: (shadow_px, shadow_px) from
-        ``crackgen.shadow_pattern.shadow_alpha`` (ignored when ``spec.shadow.enabled`` is False).
+        ``crackgen.procedural.shadow_pattern.shadow_alpha`` (ignored when ``spec.shadow.enabled`` is False).
         Render settings (samples, denoise, threads, bounces, Cycles seed) come from
         ``spec.render``; the device was chosen once at build.
         """

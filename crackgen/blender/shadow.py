@@ -4,7 +4,7 @@ Why a real plane and not a light gobo: it works for every light kind (sun, area,
 spot, point), and Cycles then produces physically right penumbrae from the light's
 size. The plane is invisible to camera and glossy rays, so it never appears in the
 image or in reflections, only in the shadows it casts. Its opacity comes from an
-alpha image (``crackgen.shadow_pattern``) mixing a black diffuse BSDF with a
+alpha image (``crackgen.procedural.shadow_pattern``) mixing a black diffuse BSDF with a
 Transparent BSDF, which Cycles treats as a transparent shadow.
 Built once; per sample only its pose, pixels and visibility change.
 """
@@ -15,7 +15,7 @@ import numpy as np
 from mathutils import Matrix
 
 from crackgen.blender.lights import frame_facing, light_direction
-from crackgen.spec import LightSpec, ShadowSpec
+from crackgen.config.spec import LightSpec, ShadowSpec
 
 
 class ShadowError(ValueError):

@@ -3,7 +3,7 @@
 Why built once: the grid's triangles and UVs never change for a given ``grid_px``,
 so only vertex positions (``foreach_set('co')``) and texture pixels
 (``image.pixels.foreach_set``) are written per sample. The mesh is made from
-``crackgen.surface``'s own triangles, so Cycles renders exactly the geometry the ray
+``crackgen.procedural.surface``'s own triangles, so Cycles renders exactly the geometry the ray
 caster sees (passing quads would let Blender pick other diagonals).
 
 Colour spaces: the material maps are linear floats, so albedo is tagged
@@ -17,7 +17,7 @@ from typing import Protocol
 import bpy
 import numpy as np
 
-from crackgen.surface import surface_faces, surface_uvs
+from crackgen.procedural.surface import surface_faces, surface_uvs
 
 
 class SurfaceUpdateError(ValueError):

@@ -1,0 +1,1 @@
+"""Recipe -> SampleSpec: validated recipes and every random draw of a sample."""

@@ -1,0 +1,391 @@
+"""SampleSpec: every random draw of one sample, as plain data.
+
+A spec depends only on (recipe, index): ``make_spec`` seeds one numpy Generator
+from ``SeedSequence([recipe.dataset.seed, index])`` and makes every draw there.
+Everything downstream (crack map, materials, renderer, sensors) is a pure
+function of the spec, so output is identical whatever the worker count/order.
+
+Units: metres and radians; pixel quantities end in ``_px``.
+World frame: the surface lies in the z = 0 plane, centred on the origin, z up.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import typing
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+SPEC_VERSION = 1
+
+
+@dataclass
+class CrackSpec:
+    """Thesis eq. 5.3-5.6 parameters plus the per-sample noise seed/offset."""
+
+    freq_x: float  # noise frequency across the surface (cycles per surface width)
+    freq_y: float
+    octaves: int
+    persistence: float
+    lacunarity: float
+    threshold: float  # mask = Z < threshold; larger -> wider cracks
+    depth_m: float  # displacement (m) where D reaches its maximum (= threshold)
+    noise_seed: int  # OpenSimplex seed
+    offset_u: float  # random offset of the noise domain, noise units
+    offset_v: float
+
+
+@dataclass
+class SurfaceSpec:
+    size_m: float  # side of the square patch (m)
+    grid_px: int  # mesh vertices per side
+    crackmap_px: int  # crack map resolution per side (surface coordinates)
+
+
+@dataclass
+class DistractorSpec:
+    """A non-crack feature painted into the material; its mask stays empty."""
+
+    kind: str  # joint | sealant | stain | marking
+    seed: int
+
+
+@dataclass
+class MaterialSpec:
+    family: str  # asphalt | concrete | masonry | steel (blender_assets/materials/*.toml)
+    seed: int  # seeds the texture noise
+    texture_px: int  # albedo/roughness/normal map resolution per side
+    hue_shift: float  # small colour variation, fraction of the family's base colour
+    value_scale: float  # brightness multiplier of the albedo
+    roughness_offset: float  # added to the family roughness
+    crack_darkening: float  # albedo multiplier inside the crack (0..1)
+    crack_roughness: float  # roughness inside the crack (0..1)
+    distractors: list[DistractorSpec] = field(default_factory=list)
+
+
+@dataclass
+class LightSpec:
+    kind: str  # sun | area | spot | point
+    elevation_rad: float  # above the surface plane
+    azimuth_rad: float
+    distance_m: float  # from the surface centre (ignored for sun)
+    intensity: float  # sun: irradiance W/m^2; others: power W
+    color_temp_k: float
+    size_m: float  # area size / point+spot radius (m); sun: angular diameter (rad)
+    spot_angle_rad: float  # spot cone angle (ignored otherwise)
+
+
+@dataclass
+class AmbientSpec:
+    strength: float  # world background strength (0 = off)
+    color_temp_k: float
+
+
+@dataclass
+class ShadowSpec:
+    """Occluder between one light and the surface (thesis 5.2.5); invisible to cameras."""
+
+    enabled: bool
+    pattern: str  # noise | shapes | stripes
+    seed: int
+    light_index: int  # which light it blocks
+    height_m: float  # distance from the surface along the light direction
+    size_m: float  # side of the square occluder
+    coverage: float  # opaque fraction of the occluder (0..1)
+    softness: float  # edge blur, fraction of the occluder size
+    offset_x_m: float  # occluder centre offset perpendicular to the light ray
+    offset_y_m: float
+
+
+@dataclass
+class CameraSpec:
+    width_px: int
+    height_px: int
+    distance_m: float  # camera centre to target point
+    tilt_rad: float  # angle between optical axis and the surface normal
+    azimuth_rad: float
+    roll_rad: float
+    focal_mm: float
+    sensor_width_mm: float
+    cx_offset_px: float  # principal point jitter from the image centre
+    cy_offset_px: float
+    target_x_m: float  # look-at point on the surface
+    target_y_m: float
+    baseline_m: float  # right stereo camera along +x of the camera; 0 = none
+
+
+@dataclass
+class RenderSpec:
+    samples: int
+    denoise: bool
+    threads: int  # 0 = let Cycles decide
+    device: str  # cpu | gpu
+    seed: int  # Cycles seed
+    max_bounces: int
+
+
+@dataclass
+class TofSpec:
+    enabled: bool
+    width_px: int
+    height_px: int
+    hfov_rad: float
+    vfov_rad: float
+    offset_m: list[float]  # ToF centre in the RGB camera frame (OpenCV: x right, y down, z fwd)
+    rotation_rad: list[float]  # small xyz Euler rotation relative to the RGB camera
+    sigma0_m: float  # range noise floor
+    k_noise: float  # sigma = sigma0 + k * d^2 / A
+    amplitude_scale: float  # A = scale * albedo * cos(theta) / d^2
+    min_amplitude: float  # dropout below this amplitude (0 = off)
+    grazing_rad: float  # dropout when incidence angle exceeds this (pi/2 = off)
+    flying_pixels: bool  # mixed pixels at depth discontinuities
+    wrap_range_m: float  # unambiguous range; 0 = no phase wrap
+    bias_m: float  # per-sample range bias
+    seed: int
+
+
+@dataclass
+class LidarSpec:
+    enabled: bool
+    beams: int
+    vfov_min_rad: float
+    vfov_max_rad: float
+    hfov_rad: float  # azimuth sweep centred on the optical axis
+    azimuth_step_rad: float
+    max_range_m: float
+    sigma_m: float
+    dropout: float  # fraction of returns lost at random
+    offset_m: list[float]  # in the RGB camera frame (OpenCV)
+    rotation_rad: list[float]
+    seed: int
+
+
+@dataclass
+class StereoSpec:
+    enabled: bool
+    baseline_m: float
+    num_disparities: int  # SGBM search range (multiple of 16)
+    block_size: int  # SGBM block size (odd)
+
+
+@dataclass
+class SampleSpec:
+    index: int
+    recipe_seed: int
+    crack: CrackSpec
+    surface: SurfaceSpec
+    material: MaterialSpec
+    lights: list[LightSpec]
+    ambient: AmbientSpec
+    shadow: ShadowSpec
+    camera: CameraSpec
+    render: RenderSpec
+    tof: TofSpec
+    lidar: LidarSpec
+    stereo: StereoSpec
+    version: int = SPEC_VERSION
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), sort_keys=True)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "SampleSpec":
+        return _from_dict(cls, data)
+
+    @classmethod
+    def from_json(cls, text: str) -> "SampleSpec":
+        return cls.from_dict(json.loads(text))
+
+
+def _from_dict(tp: Any, value: Any) -> Any:
+    """Rebuild nested dataclasses from ``asdict`` output, by type hints."""
+    if dataclasses.is_dataclass(tp):
+        hints = typing.get_type_hints(tp)
+        names = {f.name for f in dataclasses.fields(tp)}
+        unknown = set(value) - names
+        if unknown:
+            raise ValueError(f"{tp.__name__}: unknown keys {sorted(unknown)}")
+        return tp(**{k: _from_dict(hints[k], v) for k, v in value.items()})
+    origin = typing.get_origin(tp)
+    if origin is list:
+        (item,) = typing.get_args(tp)
+        return [_from_dict(item, v) for v in value]
+    if tp is float:
+        return float(value)
+    if tp is int:
+        return int(value)
+    return value
+
+
+def local_light_power(kind: str, irradiance_w_m2: float, distance_m: float) -> float:
+    """Blender power (W) giving ``irradiance_w_m2`` on-axis at ``distance_m``, so every light kind
+    is as bright as a sun of the same strength (point/spot radiate over 4*pi sr, an area light
+    is a Lambertian emitter: pi)."""
+    solid = math.pi if kind == "area" else 4.0 * math.pi
+    return float(irradiance_w_m2 * solid * distance_m**2)
+
+
+def sample_rng(recipe_seed: int, index: int) -> np.random.Generator:
+    """The one Generator a sample's draws come from."""
+    return np.random.default_rng(np.random.SeedSequence([int(recipe_seed), int(index)]))
+
+
+def make_spec(recipe: "Recipe", index: int) -> SampleSpec:  # noqa: F821
+    """Draw every random parameter of sample ``index`` of ``recipe``."""
+    from crackgen.config.recipe import Recipe  # local: keeps spec importable alone
+
+    assert isinstance(recipe, Recipe)
+    rng = sample_rng(recipe.dataset.seed, index)
+
+    def seed() -> int:
+        return int(rng.integers(0, 2**31 - 1))
+
+    def rad(d: float) -> float:
+        return math.radians(d)
+
+    c = recipe.crack
+    crack = CrackSpec(
+        freq_x=c.frequency_x.draw(rng),
+        freq_y=c.frequency_y.draw(rng),
+        octaves=int(c.octaves.draw(rng)),
+        persistence=c.persistence.draw(rng),
+        lacunarity=c.lacunarity.draw(rng),
+        threshold=c.threshold.draw(rng),
+        depth_m=c.depth_m.draw(rng),
+        noise_seed=seed(),
+        offset_u=float(rng.uniform(-1000.0, 1000.0)),
+        offset_v=float(rng.uniform(-1000.0, 1000.0)),
+    )
+    s = recipe.surface
+    surface = SurfaceSpec(size_m=s.size_m.draw(rng), grid_px=s.grid_px, crackmap_px=s.crackmap_px)
+
+    m = recipe.material
+    kinds = [k for k in ("joint", "sealant", "stain", "marking") if rng.random() < getattr(m.distractors, k)]
+    material = MaterialSpec(
+        family=str(m.family.draw(rng)),
+        seed=seed(),
+        texture_px=m.texture_px,
+        hue_shift=m.hue_shift.draw(rng),
+        value_scale=m.value_scale.draw(rng),
+        roughness_offset=m.roughness_offset.draw(rng),
+        crack_darkening=m.crack_darkening.draw(rng),
+        crack_roughness=m.crack_roughness.draw(rng),
+        distractors=[DistractorSpec(kind=k, seed=seed()) for k in kinds],
+    )
+
+    li = recipe.lights
+    lights = []
+    for _ in range(int(li.count.draw(rng))):
+        lights.append(
+            LightSpec(
+                kind=str(li.kind.draw(rng)),
+                elevation_rad=rad(li.elevation_deg.draw(rng)),
+                azimuth_rad=rad(li.azimuth_deg.draw(rng)),
+                distance_m=li.distance_m.draw(rng),
+                intensity=0.0,  # set below, depends on kind
+                color_temp_k=li.color_temp_k.draw(rng),
+                size_m=li.size_m.draw(rng),
+                spot_angle_rad=rad(li.spot_angle_deg.draw(rng)),
+            )
+        )
+        L = lights[-1]
+        L.intensity = li.sun_irradiance_w_m2.draw(rng) if L.kind == "sun" else local_light_power(L.kind, li.irradiance_w_m2.draw(rng), L.distance_m)
+        if L.kind == "sun":
+            L.size_m = rad(li.sun_angle_deg.draw(rng))
+    ambient = AmbientSpec(strength=li.ambient_strength.draw(rng), color_temp_k=li.ambient_color_temp_k.draw(rng))
+
+    sh = recipe.shadow
+    shadow = ShadowSpec(
+        enabled=bool(rng.random() < sh.probability),
+        pattern=str(sh.pattern.draw(rng)),
+        seed=seed(),
+        light_index=int(rng.integers(0, len(lights))),
+        height_m=sh.height_m.draw(rng),
+        size_m=sh.size_m.draw(rng),
+        coverage=sh.coverage.draw(rng),
+        softness=sh.softness.draw(rng),
+        offset_x_m=sh.offset_m.draw(rng),
+        offset_y_m=sh.offset_m.draw(rng),
+    )
+
+    ca = recipe.camera
+    st = recipe.stereo
+    baseline = st.baseline_m.draw(rng) if st.enabled else 0.0
+    camera = CameraSpec(
+        width_px=ca.width_px,
+        height_px=ca.height_px,
+        distance_m=ca.distance_m.draw(rng),
+        tilt_rad=rad(ca.tilt_deg.draw(rng)),
+        azimuth_rad=rad(ca.azimuth_deg.draw(rng)),
+        roll_rad=rad(ca.roll_deg.draw(rng)),
+        focal_mm=ca.focal_mm.draw(rng),
+        sensor_width_mm=ca.sensor_width_mm,
+        cx_offset_px=ca.principal_jitter_px.draw(rng),
+        cy_offset_px=ca.principal_jitter_px.draw(rng),
+        target_x_m=ca.target_jitter_m.draw(rng),
+        target_y_m=ca.target_jitter_m.draw(rng),
+        baseline_m=baseline,
+    )
+    r = recipe.render
+    render = RenderSpec(
+        samples=r.samples, denoise=r.denoise, threads=r.threads, device=r.device, seed=seed(), max_bounces=r.max_bounces
+    )
+
+    t = recipe.tof
+    tof = TofSpec(
+        enabled=t.enabled,
+        width_px=t.width_px,
+        height_px=t.height_px,
+        hfov_rad=rad(t.hfov_deg),
+        vfov_rad=rad(t.vfov_deg),
+        offset_m=[t.offset_x_m.draw(rng), t.offset_y_m.draw(rng), t.offset_z_m.draw(rng)],
+        rotation_rad=[rad(t.rotation_jitter_deg.draw(rng)) for _ in range(3)],
+        sigma0_m=t.sigma0_m,
+        k_noise=t.k_noise,
+        amplitude_scale=t.amplitude_scale,
+        min_amplitude=t.min_amplitude,
+        grazing_rad=rad(t.grazing_deg),
+        flying_pixels=t.flying_pixels,
+        wrap_range_m=t.wrap_range_m,
+        bias_m=t.bias_m.draw(rng),
+        seed=seed(),
+    )
+    l = recipe.lidar
+    lidar = LidarSpec(
+        enabled=l.enabled,
+        beams=l.beams,
+        vfov_min_rad=rad(l.vfov_min_deg),
+        vfov_max_rad=rad(l.vfov_max_deg),
+        hfov_rad=rad(l.hfov_deg),
+        azimuth_step_rad=rad(l.azimuth_step_deg),
+        max_range_m=l.max_range_m,
+        sigma_m=l.sigma_m,
+        dropout=l.dropout,
+        offset_m=[l.offset_x_m.draw(rng), l.offset_y_m.draw(rng), l.offset_z_m.draw(rng)],
+        rotation_rad=[rad(l.rotation_jitter_deg.draw(rng)) for _ in range(3)],
+        seed=seed(),
+    )
+    stereo = StereoSpec(
+        enabled=st.enabled, baseline_m=baseline, num_disparities=st.num_disparities, block_size=st.block_size
+    )
+    return SampleSpec(
+        index=int(index),
+        recipe_seed=int(recipe.dataset.seed),
+        crack=crack,
+        surface=surface,
+        material=material,
+        lights=lights,
+        ambient=ambient,
+        shadow=shadow,
+        camera=camera,
+        render=render,
+        tof=tof,
+        lidar=lidar,
+        stereo=stereo,
+    )

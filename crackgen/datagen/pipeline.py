@@ -1,0 +1,246 @@
+"""The per-sample pipeline a worker runs: spec -> geometry -> render -> sensors -> members.
+
+One ``SampleProducer`` lives per worker process. It builds the Blender scene the first
+time it renders (so importing this module never imports bpy) and then only updates
+it per sample. Every stage is timed (``perf_counter``) and the timings go into the
+sample's JSON, which is how ``crackgen bench`` finds where time goes.
+
+Where GT comes from: the GT mask and ``depth.exr`` are ray cast at pixel centres on
+the very mesh Blender renders (``groundtruth.view_ground_truth``), not taken from
+Blender's Depth pass: Cycles writes that pass from one jittered sample inside the
+pixel-filter footprint, so at crack walls it is not the pixel-centre depth, and the
+mask would otherwise need a second render. The Blender depth pass is still compared
+with the ray-cast depth per sample and its agreement (median |difference|) is stored
+in the metadata as a cheap, always-on check that renderer and ray caster agree.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any, Iterator
+
+import numpy as np
+
+import crackgen
+from crackgen.config.recipe import Recipe
+from crackgen.config.spec import SampleSpec, make_spec
+
+STAGES = ("spec", "crackmap", "surface", "materials", "shadow", "scene_update", "render",
+          "raycast", "groundtruth", "tof", "lidar", "stereo")
+SHADOW_PX = 256  # occluder alpha resolution (px per side)
+
+
+class PipelineError(RuntimeError):
+    """A stage failed for a sample; the message names the sample index and the stage."""
+
+
+@dataclass
+class Sample:
+    """Everything one sample produced, before encoding."""
+
+    index: int
+    members: dict[str, Any]  # member name (``rgb.png``...) -> array / dict of arrays
+    meta: dict[str, Any]
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+class _Timer:
+    def __init__(self, index: int):
+        self.index = index
+        self.t: dict[str, float] = {}
+
+    @contextmanager
+    def stage(self, name: str) -> Iterator[None]:
+        t0 = time.perf_counter()
+        try:
+            yield
+        except PipelineError:
+            raise
+        except Exception as exc:
+            msg = str(exc).strip().splitlines()
+            raise PipelineError(f"sample {self.index}: {name}: {type(exc).__name__}: {msg[0] if msg else ''}") from exc
+        finally:
+            self.t[name] = self.t.get(name, 0.0) + time.perf_counter() - t0
+
+
+def crack_pixel_fraction(mask: np.ndarray) -> float:
+    return float(np.count_nonzero(mask)) / float(mask.size)
+
+
+def fill_ratio(depth: np.ndarray) -> float:
+    """Fraction of pixels with a value (> 0) in a sparse/dense depth map (-1 = none)."""
+    return float(np.count_nonzero(depth > 0)) / float(depth.size)
+
+
+class SampleProducer:
+    """Turns sample indices of one recipe into shard members; one per worker process."""
+
+    def __init__(self, recipe: Recipe, threads: int = 0):
+        self.recipe = recipe
+        self.threads = int(threads)
+        self._scene = None
+
+    # ---- Blender (lazy: bpy is imported by the first render only)
+    @property
+    def scene(self):
+        if self._scene is None:
+            from crackgen.blender.scene import LiveScene
+
+            r = self.recipe
+            self._scene = LiveScene(
+                grid_px=r.surface.grid_px,
+                texture_px=r.material.texture_px,
+                width=r.camera.width_px,
+                height=r.camera.height_px,
+                stereo=r.stereo.enabled,
+                threads=self.threads,
+                device=r.render.device,
+                samples=r.render.samples,
+                denoise=r.render.denoise,
+                max_bounces=r.render.max_bounces,
+                max_lights=int(max(v for v in r.lights.count.support())),
+                shadow_px=SHADOW_PX,
+            )
+        return self._scene
+
+    def close(self) -> None:
+        if self._scene is not None and hasattr(self._scene, "close"):
+            self._scene.close()
+        self._scene = None
+
+    # ---- one sample
+    def make(self, index: int) -> Sample:
+        """Run every stage for sample ``index``; raises ``PipelineError`` naming the stage."""
+        from crackgen.procedural.crackmap import crack_map
+        from crackgen.sim.groundtruth import view_ground_truth
+        from crackgen.procedural.materials import material_maps
+        from crackgen.sim.raycast import MeshRaycaster
+        from crackgen.sim.rig import make_rig
+        from crackgen.procedural.shadow_pattern import shadow_alpha
+        from crackgen.procedural.surface import surface_faces, surface_uvs, surface_vertices
+
+        tm = _Timer(index)
+        with tm.stage("spec"):
+            spec: SampleSpec = make_spec(self.recipe, index)
+            rig = make_rig(spec)
+        with tm.stage("crackmap"):
+            cm = crack_map(spec.crack, size_px=spec.surface.crackmap_px, size_m=spec.surface.size_m)
+        with tm.stage("surface"):
+            g = spec.surface.grid_px
+            vertices = surface_vertices(cm, g)
+        with tm.stage("materials"):
+            maps = material_maps(spec.material, cm)
+        with tm.stage("shadow"):
+            alpha = shadow_alpha(spec.shadow, SHADOW_PX) if spec.shadow.enabled else None
+        scene = self.scene
+        with tm.stage("scene_update"):
+            # The worker's share of the cores goes to Cycles only; the spec written to the
+            # metadata keeps the recipe's value so content does not depend on the worker count.
+            run_spec = spec
+            if self.threads > 0:
+                run_spec = dataclasses.replace(spec, render=dataclasses.replace(spec.render, threads=self.threads))
+            scene_meta = scene.update(run_spec, rig, vertices, maps, alpha)
+        with tm.stage("render"):
+            out = scene.render()
+        with tm.stage("raycast"):
+            caster = MeshRaycaster(vertices, np.asarray(surface_faces(g)), np.asarray(surface_uvs(g)))
+        with tm.stage("groundtruth"):
+            gt = view_ground_truth(rig.rgb, caster, cm.mask)
+        members: dict[str, Any] = {
+            "rgb.png": out.rgb,
+            "mask.png": gt.mask,
+            "depth.exr": gt.depth,
+            "crackmap.exr": cm.depth_m,
+        }
+        sensors: dict[str, Any] = {}
+        tof = None
+        if spec.tof.enabled:
+            from crackgen.sim.sensors import sensor_rng
+            from crackgen.sim.sensors.tof import albedo_from_map, simulate_tof
+
+            with tm.stage("tof"):
+                tof = simulate_tof(spec.tof, rig, caster, albedo_from_map(maps.albedo), sensor_rng(spec.tof.seed))
+            members["tof.exr"] = tof.depth_rgb
+            # native sensor image: Z = measured radial range (m, -1 none), A = amplitude
+            members["tofraw.exr"] = {"Z": tof.range_m, "A": tof.amplitude}
+            sensors["tof"] = {"fill_rgb": fill_ratio(tof.depth_rgb), "valid": float(tof.valid.mean()),
+                              "mixed": int(tof.mixed.sum())}
+        if spec.lidar.enabled:
+            from crackgen.sim.sensors import sensor_rng
+            from crackgen.sim.sensors.lidar import simulate_lidar
+
+            with tm.stage("lidar"):
+                lidar = simulate_lidar(spec.lidar, rig, caster, sensor_rng(spec.lidar.seed))
+            members["lidar.exr"] = lidar.depth_rgb
+            sensors["lidar"] = {"fill_rgb": fill_ratio(lidar.depth_rgb), "points": int(len(lidar.points_world))}
+        if rig.right is not None:
+            from crackgen.sim.sensors.stereo import simulate_stereo
+
+            with tm.stage("stereo"):
+                st = simulate_stereo(spec.stereo, rig, out.rgb, out.right_rgb, gt.depth, tof)
+            members["right.png"] = out.right_rgb
+            members["disp_sgm.exr"] = st.disp_sgm
+            members["disp_gt.exr"] = st.disp_gt
+            if st.disp_tof is not None:  # SYNTH3-style fusion inputs in the left view
+                members["disp_tof.exr"] = st.disp_tof
+                members["tofamp.exr"] = st.tof_amplitude
+            sensors["stereo"] = {"fill_sgm": fill_ratio(st.disp_sgm), "fill_gt": fill_ratio(st.disp_gt)}
+
+        valid = (gt.depth > 0) & (out.depth > 0)
+        render_vs_raycast = float(np.median(np.abs(out.depth[valid] - gt.depth[valid]))) if valid.any() else None
+        meta = {
+            "index": int(index),
+            "spec": spec.to_dict(),
+            "cameras": rig.to_meta(),
+            "seeds": {
+                "recipe_seed": spec.recipe_seed,
+                "seed_sequence": [spec.recipe_seed, int(index)],
+                "crack_noise": spec.crack.noise_seed,
+                "material": spec.material.seed,
+                "shadow": spec.shadow.seed,
+                "render": spec.render.seed,
+                "tof": spec.tof.seed,
+                "lidar": spec.lidar.seed,
+            },
+            "crack": {
+                "length_m": None if not np.isfinite(cm.length_m) else float(cm.length_m),
+                "surface_coverage": cm.coverage,
+                "pixel_fraction": crack_pixel_fraction(gt.mask),
+            },
+            "material": {"family": spec.material.family, "distractors": [d.kind for d in spec.material.distractors]},
+            "lights": [{"kind": L.kind, "elevation_deg": float(np.degrees(L.elevation_rad))} for L in spec.lights],
+            "shadow": {"enabled": spec.shadow.enabled, "pattern": spec.shadow.pattern},
+            "depth": {
+                "source": "raycast",
+                "fill": fill_ratio(gt.depth),
+                "render_vs_raycast_median_abs_m": render_vs_raycast,
+            },
+            "sensors": sensors,
+            "render": {"device": scene_meta.get("device"), "lights": scene_meta.get("lights")},
+            "recipe_hash": self.recipe.hash,
+            "versions": {"crackgen": crackgen.__version__, "spec": spec.version, **_blender_version()},
+            "timings": {k: round(v, 6) for k, v in tm.t.items()},
+        }
+        return Sample(index=int(index), members=members, meta=meta, timings=tm.t)
+
+    def produce(self, index: int) -> tuple[dict[str, Any], dict[str, Any]]:
+        """(members, meta) for ``run_shard``; the writer adds ``json`` = meta."""
+        s = self.make(index)
+        return s.members, s.meta
+
+
+_BLENDER_VERSION: dict[str, str] | None = None
+
+
+def _blender_version() -> dict[str, str]:
+    global _BLENDER_VERSION
+    if _BLENDER_VERSION is None:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            _BLENDER_VERSION = {"bpy": version("bpy")}
+        except PackageNotFoundError:
+            _BLENDER_VERSION = {}
+    return _BLENDER_VERSION

@@ -1,0 +1,1 @@
+"""Procedural content in surface coordinates: noise, crack map, surface mesh, PBR maps, distractors, shadow masks."""

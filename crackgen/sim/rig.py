@@ -1,0 +1,63 @@
+"""The sensor rig of one sample: RGB (+ right) camera, ToF camera and LiDAR poses.
+
+Pure numpy, from the SampleSpec only, so the renderer, the ray-cast sensors and
+the written metadata all use the very same K and T (OpenCV convention).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from crackgen.config.spec import SampleSpec
+from fusion.camera import Camera, intrinsics_from_focal, intrinsics_from_fov, look_at, mounted_pose
+
+
+@dataclass(frozen=True)
+class Rig:
+    rgb: Camera
+    right: Camera | None  # stereo right camera (same K, +baseline along rgb x)
+    tof: Camera | None
+    T_lidar_world: np.ndarray | None  # LiDAR frame: same axes as the RGB camera (z = sweep centre)
+
+    def to_meta(self) -> dict:
+        out = {"rgb": self.rgb.to_meta()}
+        if self.right is not None:
+            out["right"] = self.right.to_meta()
+        if self.tof is not None:
+            out["tof"] = self.tof.to_meta()
+        if self.T_lidar_world is not None:
+            out["lidar"] = {"T_cam_world": self.T_lidar_world.tolist()}
+        return out
+
+
+def rgb_camera(spec: SampleSpec) -> Camera:
+    c = spec.camera
+    target = np.array([c.target_x_m, c.target_y_m, 0.0])
+    toward_cam = np.array([np.sin(c.tilt_rad) * np.cos(c.azimuth_rad), np.sin(c.tilt_rad) * np.sin(c.azimuth_rad), np.cos(c.tilt_rad)])
+    eye = target + c.distance_m * toward_cam
+    # Image-down points horizontally toward the camera's foot, so the near ground is at the bottom.
+    down_hint = np.array([np.cos(c.azimuth_rad), np.sin(c.azimuth_rad), 0.0])
+    T = look_at(eye, target, down_hint, c.roll_rad)
+    K = intrinsics_from_focal(c.focal_mm, c.sensor_width_mm, c.width_px, c.height_px, c.cx_offset_px, c.cy_offset_px)
+    return Camera(K, T, c.width_px, c.height_px)
+
+
+def make_rig(spec: SampleSpec) -> Rig:
+    rgb = rgb_camera(spec)
+    right = None
+    if spec.stereo.enabled and spec.camera.baseline_m > 0:
+        right = Camera(rgb.K, mounted_pose(rgb.T_cam_world, [spec.camera.baseline_m, 0.0, 0.0], [0.0, 0.0, 0.0]), rgb.width, rgb.height)
+    tof = None
+    if spec.tof.enabled:
+        t = spec.tof
+        tof = Camera(
+            intrinsics_from_fov(t.hfov_rad, t.vfov_rad, t.width_px, t.height_px),
+            mounted_pose(rgb.T_cam_world, t.offset_m, t.rotation_rad),
+            t.width_px,
+            t.height_px,
+        )
+    T_lidar = None
+    if spec.lidar.enabled:
+        T_lidar = mounted_pose(rgb.T_cam_world, spec.lidar.offset_m, spec.lidar.rotation_rad)
+    return Rig(rgb=rgb, right=right, tof=tof, T_lidar_world=T_lidar)

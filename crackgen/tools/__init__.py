@@ -1,0 +1,1 @@
+"""User-facing tools: the crackgen CLI, gallery, show and benchmarks."""

@@ -1,0 +1,186 @@
+"""`crackgen` command line: generate, validate, inspect, bench, show, verify.
+
+Each subcommand imports its heavy modules lazily so `crackgen --help` and
+`crackgen validate` stay fast. Bad input exits 1 with one line per problem; a run
+whose samples/shards failed (or whose worker died) exits 3 after its summary.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from crackgen import __version__
+
+EXIT_BAD_INPUT = 1
+EXIT_RUN_FAILED = 3
+
+
+def _err(msg: str) -> int:
+    print(f"crackgen: {msg}", file=sys.stderr)
+    return EXIT_BAD_INPUT
+
+
+def _load(path: str):
+    """The recipe, or None after printing its problems (one line each)."""
+    from crackgen.config.recipe import RecipeError, load_recipe
+
+    try:
+        return load_recipe(path)
+    except RecipeError as exc:
+        for line in exc.problems:
+            print(line, file=sys.stderr)
+        return None
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from crackgen.config.recipe import summary
+
+    recipe = _load(args.recipe)
+    if recipe is None:
+        return EXIT_BAD_INPUT
+    print(f"{args.recipe}: OK")
+    print(summary(recipe))
+    return 0
+
+
+def _cmd_generate(args: argparse.Namespace) -> int:
+    from crackgen.datagen.generate import GenerateError, GenerateOptions, generate, parse_storage_options
+
+    recipe = _load(args.recipe)
+    if recipe is None:
+        return EXIT_BAD_INPUT
+    try:
+        opts = GenerateOptions(
+            out=args.out, workers=args.workers, backend=args.backend, ray_address=args.ray_address,
+            samples=args.samples, resume=args.resume, storage_options=parse_storage_options(args.storage_options),
+            progress=not args.no_progress,
+        )
+        summary = generate(recipe, opts)
+    except GenerateError as exc:
+        return _err(str(exc))
+    if args.json:
+        print(json.dumps(summary.to_dict(), indent=1))
+    else:
+        for line in summary.lines():
+            print(line)
+    if summary.aborted:
+        print(f"crackgen: aborted: {summary.aborted}; run again with --resume", file=sys.stderr)
+    elif not summary.ok:
+        print(f"crackgen: {len(summary.failures)} samples and {len(summary.shard_errors)} shards failed "
+              "(listed in the manifest); --resume redoes them", file=sys.stderr)
+    return 0 if summary.ok else EXIT_RUN_FAILED
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from crackgen.tools.bench import bench, format_table
+
+    recipe = _load(args.recipe)
+    if recipe is None:
+        return EXIT_BAD_INPUT
+    if args.samples < 1:
+        return _err(f"--samples must be >= 1, got {args.samples}")
+    result = bench(recipe, samples=args.samples, threads=args.threads, progress=not args.json)
+    print(json.dumps(result, indent=1) if args.json else format_table(result))
+    return 0
+
+
+def _cmd_inspect(args: argparse.Namespace) -> int:
+    from crackgen.tools.gallery import InspectError, write_gallery
+
+    try:
+        index = write_gallery(args.dir, page_size=args.page_size, limit=args.limit)
+    except InspectError as exc:
+        return _err(str(exc))
+    print(f"gallery: {index}")
+    return 0
+
+
+def _cmd_show(args: argparse.Namespace) -> int:
+    from crackgen.tools.show import ShowError, show
+
+    if not args.pointcloud and not args.png:
+        return _err("show: give --pointcloud OUT.ply and/or --png OUT.png")
+    try:
+        lines = show(args.dir, args.key, pointcloud=args.pointcloud, png=args.png, source=args.depth)
+    except ShowError as exc:
+        return _err(str(exc))
+    for line in lines:
+        print(line)
+    return 0
+
+
+def _cmd_verify(args: argparse.Namespace) -> int:
+    from crackgen.shards import verify_dataset
+
+    problems = verify_dataset(args.dir, decode=not args.quick)
+    for p in problems:
+        print(p, file=sys.stderr)
+    if problems:
+        return EXIT_RUN_FAILED
+    print(f"{args.dir}: OK")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="crackgen", description="Synthetic RGB-D crack datasets from headless Blender.")
+    p.add_argument("--version", action="version", version=f"crackgen {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    g = sub.add_parser("generate", help="render a dataset of shards from a recipe")
+    g.add_argument("recipe")
+    g.add_argument("--out", required=True, help="output directory or fsspec URL (s3://bucket/path)")
+    g.add_argument("--workers", type=int, default=1, help="worker processes (local) or CPUs (local Ray); default 1")
+    g.add_argument("--backend", choices=("local", "ray"), default="local", help="local process pool or Ray tasks")
+    g.add_argument("--ray-address", default=None, help="Ray cluster address (default: start a local Ray)")
+    g.add_argument("--samples", type=int, default=None, help="override dataset.samples (changes the recipe hash)")
+    g.add_argument("--resume", action="store_true", help="continue a dataset: keep verified shards, redo the rest")
+    g.add_argument("--storage-options", default=None,
+                   help="fsspec storage options as JSON (default: $CRACKGEN_STORAGE_OPTIONS)")
+    g.add_argument("--no-progress", action="store_true", help="no progress bar")
+    g.add_argument("--json", action="store_true", help="print the summary as JSON")
+    g.set_defaults(func=_cmd_generate)
+
+    v = sub.add_parser("validate", help="check a recipe and print its summary")
+    v.add_argument("recipe")
+    v.set_defaults(func=_cmd_validate)
+
+    i = sub.add_parser("inspect", help="write an HTML gallery DIR/inspect/index.html and a contact sheet")
+    i.add_argument("dir")
+    i.add_argument("--page-size", type=int, default=24, help="samples per gallery page")
+    i.add_argument("--limit", type=int, default=None, help="at most this many samples")
+    i.set_defaults(func=_cmd_inspect)
+
+    b = sub.add_parser("bench", help="per-stage timing table of the sample pipeline")
+    b.add_argument("recipe")
+    b.add_argument("--samples", type=int, default=5, help="timed samples (after one warm-up sample)")
+    b.add_argument("--threads", type=int, default=0, help="Cycles threads (0 = recipe value, else all cores)")
+    b.add_argument("--json", action="store_true", help="machine-readable output")
+    b.set_defaults(func=_cmd_bench)
+
+    s = sub.add_parser("show", help="coloured point cloud (and a PNG view) of one sample")
+    s.add_argument("dir")
+    s.add_argument("key", help="sample key, e.g. 000000-00001")
+    s.add_argument("--pointcloud", default=None, help="write a .ply point cloud")
+    s.add_argument("--png", default=None, help="write a rendered view of the point cloud")
+    s.add_argument("--depth", choices=("depth", "tof", "lidar"), default="depth", help="which depth map to lift")
+    s.set_defaults(func=_cmd_show)
+
+    c = sub.add_parser("verify", help="check every shard against the manifest (size, sha256, decodes)")
+    c.add_argument("dir")
+    c.add_argument("--quick", action="store_true", help="size and sha256 only, do not decode members")
+    c.set_defaults(func=_cmd_verify)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

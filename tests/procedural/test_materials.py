@@ -1,0 +1,248 @@
+"""Procedural materials: family files, map shapes/ranges, crack shading, distractors, normals."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from crackgen.procedural.crackmap import crack_map
+from crackgen.procedural.materials import (
+    Family,
+    MaterialError,
+    Speckles,
+    _speckles,
+    list_families,
+    load_family,
+    material_maps,
+    normal_from_height,
+    resample_crack,
+    save_preview,
+)
+from crackgen.config.recipe import Recipe
+from crackgen.config.spec import DistractorSpec, MaterialSpec, make_spec
+from crackgen.procedural.texgrid import TexGrid
+
+FAMILIES = ["asphalt", "concrete", "masonry", "steel"]
+KINDS = ["joint", "sealant", "stain", "marking"]
+
+
+@pytest.fixture(scope="module")
+def cm():
+    spec = make_spec(Recipe.model_validate({"crack": {"threshold": 0.06}}), 1)
+    m = crack_map(spec.crack, 128, 2.0, measure=False)
+    assert 0.01 < m.mask.mean() < 0.5
+    return m
+
+
+def empty_like(cm):
+    return dataclasses.replace(cm, mask=np.zeros_like(cm.mask), depth_m=np.zeros_like(cm.depth_m))
+
+
+def mspec(family="asphalt", seed=7, px=96, distractors=(), **kw) -> MaterialSpec:
+    args = dict(hue_shift=0.02, value_scale=1.0, roughness_offset=0.0, crack_darkening=0.3, crack_roughness=0.97)
+    args.update(kw)
+    return MaterialSpec(family=family, seed=seed, texture_px=px, distractors=list(distractors), **args)
+
+
+def test_every_family_file_loads():
+    assert set(FAMILIES) <= set(list_families())
+    for name in list_families():
+        fam = load_family(name)
+        assert isinstance(fam, Family) and fam.name == name
+    assert load_family("masonry").bricks is not None
+    assert load_family("steel").paint is not None
+    assert load_family("asphalt").speckles
+
+
+def test_unknown_family_is_one_line_error():
+    with pytest.raises(MaterialError) as e:
+        load_family("marble_xyz")
+    msg = str(e.value)
+    assert "\n" not in msg and "marble_xyz" in msg and "asphalt" in msg
+
+
+_OK = "base_color = [0.1, 0.1, 0.1]\nroughness = 0.5\n"
+
+
+@pytest.mark.parametrize(
+    "body, field",
+    [
+        ("base_color = [0.1, 0.1, 0.1]\nroughness = 1.7\n", "roughness"),
+        ("base_color = [0.1, 0.1]\nroughness = 0.5\n", "base_color"),
+        (_OK + "shine = 3\n", "shine: unknown key"),
+        (_OK + "[[layers]]\ntarget = 'colour'\nscale_m = 1\namplitude = 0.1\n", "layers.0.target"),
+        (_OK + "[[speckles]]\ncoverage = 0.2\nsize_m = [0.01, 0.001]\ncolors = [[0,0,0]]\n", "size_m: min must be"),
+        (_OK + "[bricks]\nsize_m = [0.2, 0.06]\nmortar_color = [0.3, 0.3, 0.3]\ncolors = [[0.3, 0.1, 0.1]]\n",
+         "bricks.mortar_m"),
+        ("base_color = [0.1, 0.1, 0.1\n", "not valid TOML"),
+    ],
+)
+def test_bad_family_file_names_file_and_field(tmp_path, monkeypatch, body, field):
+    (tmp_path / "materials").mkdir()
+    (tmp_path / "materials" / "bad.toml").write_text(body)
+    monkeypatch.setenv("CRACKGEN_ASSETS", str(tmp_path))
+    with pytest.raises(MaterialError) as e:
+        load_family("bad")
+    msg = str(e.value)
+    assert "\n" not in msg and "bad.toml" in msg and field in msg
+
+
+def test_unknown_distractor_kind_names_field(cm):
+    with pytest.raises(MaterialError, match=r"material\.distractors\[0\]\.kind"):
+        material_maps(mspec(distractors=[DistractorSpec("graffiti", 1)]), cm)
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_maps_shapes_dtypes_ranges(cm, family):
+    px = 96  # differs from the crack map's 128: exercises resampling
+    m = material_maps(mspec(family, px=px), cm)
+    assert m.albedo.shape == (px, px, 3) and m.albedo.dtype == np.float32
+    assert m.normal.shape == (px, px, 3) and m.normal.dtype == np.float32
+    for a in (m.roughness, m.height_m):
+        assert a.shape == (px, px) and a.dtype == np.float32
+    assert m.distractor_mask.shape == (px, px) and m.distractor_mask.dtype == bool
+    assert m.crack_mask.shape == (px, px) and m.crack_mask.dtype == bool
+    for a in (m.albedo, m.roughness, m.normal):
+        assert np.isfinite(a).all() and a.min() >= 0.0 and a.max() <= 1.0
+    assert m.albedo.std() > 0.005  # textured, not flat
+
+
+def test_deterministic_and_seed_dependent(cm):
+    ds = [DistractorSpec("stain", 3), DistractorSpec("joint", 4)]
+    a = material_maps(mspec("concrete", seed=5, distractors=ds), cm)
+    b = material_maps(mspec("concrete", seed=5, distractors=ds), cm)
+    c = material_maps(mspec("concrete", seed=6, distractors=ds), cm)
+    for f in ("albedo", "roughness", "normal", "height_m", "distractor_mask"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f))
+    assert np.abs(a.albedo - c.albedo).mean() > 1e-3
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_crack_texels_darker_rougher_and_lower(cm, family):
+    cd = 0.3
+    spec = mspec(family, crack_darkening=cd, crack_roughness=0.97, roughness_offset=-0.1)
+    with_crack = material_maps(spec, cm)
+    without = material_maps(spec, empty_like(cm))
+    inside = with_crack.crack_mask
+    assert inside.any() and not without.crack_mask.any()
+    np.testing.assert_array_equal(with_crack.albedo[~inside], without.albedo[~inside])
+    # Per-texel darkening factor: crack_darkening with +-20 % variation, mean close to crack_darkening.
+    ok = without.albedo[inside] > 1e-3
+    ratio = with_crack.albedo[inside][ok] / without.albedo[inside][ok]
+    assert ratio.min() >= 0.8 * cd - 1e-4 and ratio.max() <= 1.2 * cd + 1e-4
+    assert abs(ratio.mean() - cd) < 0.05 * cd
+    lum_in = with_crack.albedo[inside].mean()
+    lum_out = with_crack.albedo[~inside].mean()
+    assert lum_in < lum_out * cd * 1.5
+    assert np.all(with_crack.roughness[inside] == np.float32(0.97))
+    assert with_crack.roughness[inside].mean() > with_crack.roughness[~inside].mean()
+    # crack depth enters the height map (normal map shading of the walls)
+    _, depth = resample_crack(cm, spec.texture_px)
+    np.testing.assert_allclose(without.height_m - with_crack.height_m, depth, atol=1e-6)
+    assert np.abs(with_crack.normal - without.normal).max() > 0.1
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_distractor_paints_only_its_mask_and_never_the_crack_mask(cm, kind):
+    mask_before = cm.mask.copy()
+    base = material_maps(mspec("asphalt", px=128), cm)
+    m = material_maps(mspec("asphalt", px=128, distractors=[DistractorSpec(kind, 21)]), cm)
+    dm = m.distractor_mask
+    assert dm.any() and not base.distractor_mask.any()
+    np.testing.assert_array_equal(cm.mask, mask_before)
+    np.testing.assert_array_equal(m.crack_mask, base.crack_mask)
+    changed = np.abs(m.albedo - base.albedo).max(axis=-1) > 1e-6
+    assert not changed[~dm].any()  # nothing outside the mask
+    assert changed[dm].mean() > 0.95  # (almost) everything inside it
+    np.testing.assert_array_equal(m.roughness[~dm], base.roughness[~dm])
+
+
+def test_distractor_kinds_look_as_described(cm):
+    def maps(kind, seed=5):
+        return material_maps(mspec("asphalt", px=128, distractors=[DistractorSpec(kind, seed)]), empty_like(cm))
+
+    base = material_maps(mspec("asphalt", px=128), empty_like(cm))
+    lum = lambda m: m.albedo.mean(axis=-1)  # noqa: E731
+    j = maps("joint")
+    assert lum(j)[j.distractor_mask].mean() < lum(base)[j.distractor_mask].mean()
+    assert j.height_m[j.distractor_mask].mean() < base.height_m[j.distractor_mask].mean()
+    s = maps("sealant")
+    assert s.roughness[s.distractor_mask].mean() < base.roughness[s.distractor_mask].mean()
+    mk = maps("marking")
+    assert lum(mk)[mk.distractor_mask].mean() > 2 * lum(base)[mk.distractor_mask].mean()
+    assert mk.roughness[mk.distractor_mask].mean() < base.roughness[mk.distractor_mask].mean()
+    st = maps("stain")
+    assert lum(st)[st.distractor_mask].mean() < lum(base)[st.distractor_mask].mean()
+    # a sealant strip is wider than a saw-cut joint
+    assert s.distractor_mask.sum() > j.distractor_mask.sum()
+
+
+def test_normal_map_unit_length_and_hand_computed():
+    px, texel = 32, 0.01
+    flat = normal_from_height(np.full((px, px), 0.003, np.float32), texel)
+    np.testing.assert_allclose(flat, np.broadcast_to([0.5, 0.5, 1.0], flat.shape), atol=1e-7)
+    slope = 0.5
+    x = (np.arange(px) + 0.5) * texel
+    ramp_u = normal_from_height(np.tile(slope * x, (px, 1)).astype(np.float32), texel) * 2 - 1
+    k = 1 / np.sqrt(1 + slope**2)
+    np.testing.assert_allclose(ramp_u[5, 5], [-slope * k, 0.0, k], atol=1e-5)
+    ramp_v = normal_from_height(np.tile(slope * x[:, None], (1, px)).astype(np.float32), texel) * 2 - 1
+    # +Y of the normal map is +v (rows): height rising along v tilts the normal towards -v.
+    np.testing.assert_allclose(ramp_v[5, 5], [0.0, -slope * k, k], atol=1e-5)
+
+
+def test_generated_normals_are_unit_length(cm):
+    m = material_maps(mspec("masonry", px=96), cm)
+    n = m.normal * 2 - 1
+    np.testing.assert_allclose(np.linalg.norm(n, axis=-1), 1.0, atol=1e-5)
+    assert (n[..., 2] > 0).all()
+
+
+def test_masonry_mortar_lines_at_brick_period(cm):
+    px, size = 512, 1.0
+    fam = load_family("masonry")
+    pitch_v = fam.bricks.size_m[1] + fam.bricks.mortar_m
+    flat = dataclasses.replace(empty_like(cm), size_m=size)
+    m = material_maps(mspec("masonry", px=px), flat)
+    assert not m.crack_mask.any() and not m.distractor_mask.any()  # mortar joints are not cracks
+    # Bed joints are continuous along u: the row-mean height dips once per brick course.
+    prof = m.height_m.mean(axis=1)
+    prof = prof - prof.mean()
+    ac = np.correlate(prof, prof, mode="full")[px - 1:]
+    expected = pitch_v / (size / px)
+    lags = np.arange(int(expected * 0.5), int(expected * 1.5))
+    assert abs(lags[np.argmax(ac[lags])] - expected) <= 1.5
+    # Mortar is darker-or-different in colour and lower: texels within the recessed joints.
+    low = m.height_m < np.percentile(m.height_m, 5)
+    assert low.any()
+    mortar = np.asarray(fam.bricks.mortar_color)
+    assert np.abs(m.albedo[low].mean(axis=0) - mortar).max() < np.abs(m.albedo[~low].mean(axis=0) - mortar).max()
+
+
+def test_speckle_coverage_matches_family_setting():
+    grid = TexGrid(256, 1.0)
+    sp = Speckles(coverage=0.3, size_m=[0.01, 0.02], colors=[[1.0, 1.0, 1.0]], color_jitter=0.0, edge=0.01)
+    alb = np.zeros((256, 256, 3), np.float32)
+    rough = np.zeros((256, 256), np.float32)
+    h = np.zeros((256, 256), np.float32)
+    _speckles(sp, grid, np.random.default_rng(0), alb, rough, h)
+    covered = (alb[..., 0] > 0.5).mean()
+    assert 0.2 < covered <= 0.32  # overlaps only reduce it
+
+
+def test_resample_crack_nearest_and_bilinear(cm):
+    mask, depth = resample_crack(cm, 256)
+    np.testing.assert_array_equal(mask, np.kron(cm.mask, np.ones((2, 2), bool)))
+    assert abs(depth.mean() - cm.depth_m.mean()) < 0.02 * cm.depth_m.mean() + 1e-9
+    same_mask, same_depth = resample_crack(cm, 128)
+    np.testing.assert_array_equal(same_mask, cm.mask)
+
+
+def test_save_preview_writes_png(tmp_path, cm):
+    import cv2
+
+    m = material_maps(mspec("steel", px=64, distractors=[DistractorSpec("marking", 2)]), cm)
+    p = save_preview(m, tmp_path / "prev.png")
+    img = cv2.imread(str(p))
+    assert img.shape == (64, 4 * 64, 3)

@@ -1,0 +1,116 @@
+"""crackgen.procedural.surface: displaced grid geometry, topology, winding and export."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+import trimesh
+
+from crackgen.procedural.crackmap import crack_map
+from crackgen.config.spec import CrackSpec
+from crackgen.procedural.surface import (
+    SurfaceError,
+    export_mesh,
+    surface_faces,
+    surface_mesh,
+    surface_uvs,
+    surface_vertices,
+)
+
+SPEC = CrackSpec(
+    freq_x=2.0, freq_y=2.5, octaves=4, persistence=0.5, lacunarity=2.0,
+    threshold=0.05, depth_m=0.02, noise_seed=77, offset_u=3.3, offset_v=8.1,
+)  # fmt: skip
+SIZE_M = 1.5
+
+
+@pytest.fixture(scope="module")
+def cm():
+    return crack_map(SPEC, 96, SIZE_M, measure=False)
+
+
+def _bilinear_by_hand(img: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Independent bilinear lookup between texel centres (texel k centre at (k+0.5)/N)."""
+    n = img.shape[0]
+    x = np.clip(u * n - 0.5, 0, n - 1)
+    y = np.clip(v * n - 0.5, 0, n - 1)
+    x0 = np.minimum(np.floor(x).astype(int), n - 2)
+    y0 = np.minimum(np.floor(y).astype(int), n - 2)
+    fx, fy = x - x0, y - y0
+    img = img.astype(np.float64)
+    return (
+        img[y0, x0] * (1 - fx) * (1 - fy)
+        + img[y0, x0 + 1] * fx * (1 - fy)
+        + img[y0 + 1, x0] * (1 - fx) * fy
+        + img[y0 + 1, x0 + 1] * fx * fy
+    )
+
+
+def test_topology_and_uvs():
+    g = 7
+    f = surface_faces(g)
+    uv = surface_uvs(g)
+    assert f.shape == (2 * (g - 1) ** 2, 3) and f.min() == 0 and f.max() == g * g - 1
+    assert uv.shape == (g * g, 2)
+    # vertex (i, j) has index j*g + i and UV (i/(g-1), j/(g-1))
+    i, j = 4, 2
+    np.testing.assert_allclose(uv[j * g + i], [i / (g - 1), j / (g - 1)])
+    assert surface_faces(g) is f  # cached
+    with pytest.raises(SurfaceError, match="grid_px"):
+        surface_faces(1)
+
+
+def test_vertices_follow_the_crack_map(cm):
+    g = 61
+    v = surface_vertices(cm, g)
+    uv = surface_uvs(g).astype(np.float64)
+    assert v.shape == (g * g, 3) and v.dtype == np.float32
+    np.testing.assert_allclose(v[:, 0], (uv[:, 0] - 0.5) * SIZE_M, atol=1e-6)
+    np.testing.assert_allclose(v[:, 1], (uv[:, 1] - 0.5) * SIZE_M, atol=1e-6)
+    expected = -_bilinear_by_hand(cm.depth_m, uv[:, 0], uv[:, 1])
+    np.testing.assert_allclose(v[:, 2], expected, atol=1e-8)
+    assert v[:, 2].max() == 0.0 and v[:, 2].min() >= -SPEC.depth_m
+    assert np.any(v[:, 2] < -0.2 * SPEC.depth_m)  # some crack is actually carved
+
+
+def test_vertices_on_texel_centres_equal_the_map():
+    # With a 3-texel map and a 7-vertex grid, u = i/6 equals the texel centre (k + 0.5)/3
+    # for i = 1, 3, 5 (k = 0, 1, 2): those vertices must carry the texel's depth exactly.
+    small = crack_map(SPEC, 3, SIZE_M, measure=False)
+    small.depth_m[:] = np.arange(9, dtype=np.float32).reshape(3, 3) * 1e-3  # distinct values
+    v = surface_vertices(small, 7)
+    for i, k in [(1, 0), (3, 1), (5, 2)]:
+        for j, l in [(1, 0), (3, 1), (5, 2)]:
+            assert v[j * 7 + i, 2] == pytest.approx(-small.depth_m[l, k], abs=1e-9)
+
+
+def test_mesh_normals_point_up_and_metric_size(cm):
+    mesh = surface_mesh(cm, 48)
+    assert len(mesh.vertices) == 48 * 48 and len(mesh.faces) == 2 * 47 * 47
+    assert np.all(mesh.face_normals[:, 2] > 0)
+    assert np.all(mesh.vertex_normals[:, 2] > 0)
+    np.testing.assert_allclose(mesh.bounds[:, :2], [[-SIZE_M / 2] * 2, [SIZE_M / 2] * 2], atol=1e-6)
+    np.testing.assert_allclose(mesh.visual.uv, surface_uvs(48))
+    # A crack-free map gives a flat plane with normals exactly +z and area size^2.
+    flat = crack_map(dataclasses.replace(SPEC, threshold=1e-9), 32, SIZE_M, measure=False)
+    fm = surface_mesh(flat, 16)
+    np.testing.assert_allclose(fm.face_normals, np.tile([0.0, 0.0, 1.0], (len(fm.faces), 1)), atol=1e-6)
+    assert fm.area == pytest.approx(SIZE_M**2, rel=1e-6)
+
+
+@pytest.mark.parametrize("ext", [".ply", ".glb"])
+def test_export_reloads(cm, tmp_path, ext):
+    mesh = surface_mesh(cm, 32)
+    path = export_mesh(mesh, tmp_path / f"surface{ext}")
+    back = trimesh.load(path, force="mesh", process=False)
+    assert len(back.vertices) == len(mesh.vertices)
+    assert len(back.faces) == len(mesh.faces)
+    np.testing.assert_allclose(back.bounds, mesh.bounds, atol=1e-6)
+
+
+def test_export_bad_paths(cm, tmp_path):
+    mesh = surface_mesh(cm, 8)
+    with pytest.raises(SurfaceError, match="extension"):
+        export_mesh(mesh, tmp_path / "surface.obj")
+    with pytest.raises(SurfaceError, match="does not exist"):
+        export_mesh(mesh, tmp_path / "missing" / "surface.ply")
