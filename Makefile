@@ -6,7 +6,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test venv clean
+.PHONY: demo test lint venv clean
 
 venv: $(STAMP)
 
@@ -23,9 +23,17 @@ demo: $(STAMP)
 	$(BIN)/crackgen inspect out/demo
 	@echo "Gallery: $(CURDIR)/out/demo/inspect/index.html"
 
+# Lint (ruff: pyflakes, sorted imports, no relative imports) and the layering contracts
+# (import-linter, [tool.importlinter] in pyproject) run first: a broken layer fails CI.
 # pytest exits 5 when it collects nothing; that must fail, and it does (non-zero).
 test: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -q
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/lint-imports
 
 clean:
 	rm -rf $(VENV) out .pytest_cache
