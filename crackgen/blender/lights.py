@@ -17,11 +17,12 @@ import numpy as np
 from mathutils import Matrix
 
 from crackgen.config.spec import AmbientSpec, LightSpec
+from crackgen.errors import CrackgenError
 
 LIGHT_KINDS = ("sun", "area", "spot", "point")
 
 
-class LightError(ValueError):
+class LightError(CrackgenError, ValueError):
     """A light spec the pool cannot show (names the field)."""
 
 

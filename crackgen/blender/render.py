@@ -28,12 +28,14 @@ import bpy
 import numpy as np
 import OpenEXR
 
+from crackgen.errors import CrackgenError
+
 log = logging.getLogger(__name__)
 DEPTH_BACKGROUND_M = 1e8  # Cycles writes ~1e10 where a camera ray hits nothing
 _GPU_WARNED = False
 
 
-class RenderError(RuntimeError):
+class RenderError(CrackgenError, RuntimeError):
     """A render that did not produce the expected output (names the file/pass)."""
 
 

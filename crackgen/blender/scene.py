@@ -18,11 +18,12 @@ from crackgen.blender.lights import LightPool, Sky
 from crackgen.blender.render import RenderSettings, Renderer, apply_settings, configure_scene, linear_to_srgb8, select_device
 from crackgen.blender.shadow import ShadowOccluder
 from crackgen.blender.surface import LiveSurface, MapsLike
+from crackgen.errors import CrackgenError
 from crackgen.sim.rig import Rig
 from crackgen.config.spec import SampleSpec
 
 
-class SceneUpdateError(ValueError):
+class SceneUpdateError(CrackgenError, ValueError):
     """A sample that does not fit the live scene (names the field)."""
 
 

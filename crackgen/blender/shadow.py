@@ -16,9 +16,10 @@ from mathutils import Matrix
 
 from crackgen.blender.lights import frame_facing, light_direction
 from crackgen.config.spec import LightSpec, ShadowSpec
+from crackgen.errors import CrackgenError
 
 
-class ShadowError(ValueError):
+class ShadowError(CrackgenError, ValueError):
     """A shadow spec that does not fit the scene (names the field)."""
 
 

@@ -17,10 +17,11 @@ from typing import Protocol
 import bpy
 import numpy as np
 
+from crackgen.errors import CrackgenError
 from crackgen.procedural.surface import surface_faces, surface_uvs
 
 
-class SurfaceUpdateError(ValueError):
+class SurfaceUpdateError(CrackgenError, ValueError):
     """Arrays that do not fit the live surface (names the array and the expected shape)."""
 
 

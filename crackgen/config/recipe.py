@@ -18,10 +18,12 @@ import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
 from pydantic_core import PydanticCustomError
 
+from crackgen.errors import CrackgenError
+
 Scalar = Union[bool, int, float, str]
 
 
-class RecipeError(ValueError):
+class RecipeError(CrackgenError, ValueError):
     """A recipe that cannot be used; ``problems`` holds one line per problem."""
 
     def __init__(self, problems: list[str], source: str = "recipe"):

@@ -26,13 +26,14 @@ import numpy as np
 import crackgen
 from crackgen.config.recipe import Recipe
 from crackgen.config.spec import SampleSpec, make_spec
+from crackgen.errors import CrackgenError
 
 STAGES = ("spec", "crackmap", "surface", "materials", "shadow", "scene_update", "render",
           "raycast", "groundtruth", "tof", "lidar", "stereo")
 SHADOW_PX = 256  # occluder alpha resolution (px per side)
 
 
-class PipelineError(RuntimeError):
+class PipelineError(CrackgenError, RuntimeError):
     """A stage failed for a sample; the message names the sample index and the stage."""
 
 

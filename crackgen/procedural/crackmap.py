@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from crackgen.errors import CrackgenError
 from crackgen.procedural.noise import fbm
 from crackgen.config.spec import CrackSpec
 from fusion.crack_length import crack_length, skeleton
@@ -24,7 +25,7 @@ from fusion.crack_length import crack_length, skeleton
 __all__ = ["CrackMapError", "CrackMap", "crack_map", "texel_centres", "mask_at_uv", "nearest_texel", "depth_at_uv"]
 
 
-class CrackMapError(ValueError):
+class CrackMapError(CrackgenError, ValueError):
     """Bad crack-map arguments (names the field)."""
 
 

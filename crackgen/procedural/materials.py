@@ -28,6 +28,7 @@ import numpy as np
 from numba import njit, prange
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from crackgen.errors import CrackgenError
 from crackgen.procedural.distractors import DISTRACTORS, paint_distractor
 from crackgen.config.spec import MaterialSpec
 from crackgen.procedural.texgrid import TexGrid, clip01, quantile_fast, smoothstep
@@ -35,7 +36,7 @@ from crackgen.procedural.texgrid import TexGrid, clip01, quantile_fast, smoothst
 ASSETS_ENV = "CRACKGEN_ASSETS"
 
 
-class MaterialError(ValueError):
+class MaterialError(CrackgenError, ValueError):
     """A material family file or material spec that cannot be used (one line, names file/field)."""
 
 

@@ -18,10 +18,12 @@ import numpy as np
 from numba import njit, prange
 from opensimplex.internals import _init, _noise2, _noise2a
 
+from crackgen.errors import CrackgenError
+
 __all__ = ["noise2", "fbm", "NoiseError"]
 
 
-class NoiseError(ValueError):
+class NoiseError(CrackgenError, ValueError):
     """Bad arguments to a noise function (names the argument)."""
 
 

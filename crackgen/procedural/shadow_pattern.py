@@ -20,6 +20,7 @@ import math
 import cv2
 import numpy as np
 
+from crackgen.errors import CrackgenError
 from crackgen.procedural.noise import fbm
 from crackgen.config.spec import ShadowSpec
 
@@ -27,7 +28,7 @@ PATTERNS = ("noise", "shapes", "stripes")
 MAX_SHAPES = 400
 
 
-class ShadowPatternError(ValueError):
+class ShadowPatternError(CrackgenError, ValueError):
     """Bad shadow-pattern arguments (names the field)."""
 
 

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from crackgen.errors import CrackgenError
 from crackgen.procedural.crackmap import CrackMap, depth_at_uv
 
 __all__ = [
@@ -32,7 +33,7 @@ __all__ = [
 EXPORT_FORMATS = (".ply", ".glb")
 
 
-class SurfaceError(ValueError):
+class SurfaceError(CrackgenError, ValueError):
     """Bad surface-mesh arguments (names the field or file)."""
 
 

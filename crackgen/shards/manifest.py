@@ -26,6 +26,8 @@ import tempfile
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping
 
+from crackgen.errors import CrackgenError
+
 MANIFEST_NAME = "manifest.json"
 MANIFEST_FORMAT = "crackgen-shards"
 MANIFEST_VERSION = 1
@@ -34,7 +36,7 @@ _SHARD_RE = re.compile(r"^shard-(\d{6,})\.tar$")
 _CHUNK = 1 << 20
 
 
-class ManifestError(ValueError):
+class ManifestError(CrackgenError, ValueError):
     """A manifest that is missing, unreadable or inconsistent (message names the file)."""
 
 

@@ -24,12 +24,14 @@ from typing import Any, Iterable
 import cv2
 import numpy as np
 
+from crackgen.errors import CrackgenError
+
 THUMB_W = 192
 HOLE_BGR = (60, 60, 60)
 CONTACT_COLS = 8
 
 
-class InspectError(ValueError):
+class InspectError(CrackgenError, ValueError):
     """The dataset cannot be inspected (names the path)."""
 
 

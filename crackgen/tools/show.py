@@ -19,10 +19,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from crackgen.errors import CrackgenError
 from fusion.camera import Camera
 
 
-class ShowError(ValueError):
+class ShowError(CrackgenError, ValueError):
     """Bad sample/key/output for ``crackgen show`` (names what is wrong)."""
 
 

@@ -29,6 +29,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
+from crackgen.errors import CrackgenError
 from crackgen.sim.raycast import MeshRaycaster
 from crackgen.sim.rig import Rig
 from crackgen.config.spec import TofSpec
@@ -42,7 +43,7 @@ SUBRAY_OFFSETS = np.array([-1.0, 0.0, 1.0]) / 3.0  # 3x3 sub-cell centres of one
 MIX_DETECT_M = 5e-4  # non-planarity (m) above which a pixel is re-sampled with sub-rays
 
 
-class SensorError(ValueError):
+class SensorError(CrackgenError, ValueError):
     """A sensor cannot be simulated with the given rig/spec."""
 
 
