@@ -25,6 +25,8 @@ import cv2
 import numpy as np
 import OpenEXR
 
+from crackgen.errors import CrackgenError
+
 EXR_COMPRESSION = {
     "none": OpenEXR.NO_COMPRESSION,
     "zip": OpenEXR.ZIP_COMPRESSION,
@@ -36,7 +38,7 @@ PNG_LEVEL = 3  # zlib level: 3 is ~2x faster than 9 and within a few % in size o
 SINGLE_CHANNEL = "Z"
 
 
-class CodecError(ValueError):
+class CodecError(CrackgenError, ValueError):
     """A member value or member bytes that cannot be encoded/decoded."""
 
 

@@ -50,6 +50,8 @@ from .manifest import (
     shard_name,
 )
 
+from crackgen.errors import CrackgenError
+
 __all__ = [
     "ShardError", "ShardWriter", "ShardInfo", "ShardDataset", "Manifest", "ManifestError",
     "sample_key", "iter_samples", "load_sample", "list_shards", "open_dataset", "verify_dataset",
@@ -66,7 +68,7 @@ _RGB_MEMBERS = ("rgb", "right")
 _FLOAT_MEMBERS = ("depth", "tof", "lidar", "disp_sgm", "disp_gt", "disp_tof", "tofamp", "crackmap")
 
 
-class ShardError(ValueError):
+class ShardError(CrackgenError, ValueError):
     """A shard (or a sample going into one) that is bad; the message names the shard file."""
 
 
