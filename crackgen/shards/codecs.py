@@ -26,6 +26,7 @@ import numpy as np
 import OpenEXR
 
 from crackgen.errors import CrackgenError
+from crackgen.shards.members import CODEC_EXTS, SINGLE_CHANNEL, member_ext
 
 EXR_COMPRESSION = {
     "none": OpenEXR.NO_COMPRESSION,
@@ -35,16 +36,10 @@ EXR_COMPRESSION = {
     "rle": OpenEXR.RLE_COMPRESSION,
 }
 PNG_LEVEL = 3  # zlib level: 3 is ~2x faster than 9 and within a few % in size on renders
-SINGLE_CHANNEL = "Z"
 
 
 class CodecError(CrackgenError, ValueError):
     """A member value or member bytes that cannot be encoded/decoded."""
-
-
-def member_ext(name: str) -> str:
-    """Extension that selects the codec: ``rgb.png`` -> ``png``, ``json`` -> ``json``."""
-    return name.rsplit(".", 1)[-1].lower()
 
 
 # ---------------------------------------------------------------- PNG
@@ -190,7 +185,7 @@ def encode_member(ext: str, value: Any, name: str | None = None, exr_compression
         return encode_json(value, label)
     if isinstance(value, (bytes, bytearray, memoryview)):
         data = bytes(value)
-        if ext in ("png", "exr"):
+        if ext in CODEC_EXTS:  # json returned above, so png/exr: check it decodes
             decode_member(label if "." in label else f"x.{ext}", data)
         return data
     if ext == "png":
@@ -218,6 +213,6 @@ def wds_decoder(key: str, data: bytes) -> Any:
     webdataset calls handlers with the member suffix (``rgb.png``) and the raw
     bytes; returning ``None`` lets the next handler (or the raw bytes) through.
     """
-    if member_ext(key) in ("png", "exr", "json"):
+    if member_ext(key) in CODEC_EXTS:
         return decode_member(key, data)
     return None

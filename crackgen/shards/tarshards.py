@@ -34,8 +34,9 @@ from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from .codecs import CodecError, decode_member, encode_member, member_ext
-from .manifest import (
+from crackgen.errors import CrackgenError
+from crackgen.shards.codecs import CodecError, decode_member, encode_member
+from crackgen.shards.manifest import (
     Manifest,
     ManifestError,
     ShardInfo,
@@ -49,8 +50,7 @@ from .manifest import (
     shard_index,
     shard_name,
 )
-
-from crackgen.errors import CrackgenError
+from crackgen.shards.members import Codec, member_for_file, member_for_name, out_name
 
 __all__ = [
     "ShardError", "ShardWriter", "ShardInfo", "ShardDataset", "Manifest", "ManifestError",
@@ -62,11 +62,6 @@ _KEY_RE = re.compile(r"^[A-Za-z0-9_-]+$")
 _MEMBER_RE = re.compile(r"^[A-Za-z0-9_]+(\.[A-Za-z0-9_]+)*$")
 _ZERO_BLOCK = bytes(tarfile.BLOCKSIZE)
 
-# Members that live in the RGB camera's pixel grid and so must share its H×W.
-_VIEW_MEMBERS = ("rgb", "mask", "depth", "tof", "lidar", "right", "disp_sgm", "disp_gt")
-_RGB_MEMBERS = ("rgb", "right")
-_FLOAT_MEMBERS = ("depth", "tof", "lidar", "disp_sgm", "disp_gt", "disp_tof", "tofamp", "crackmap")
-
 
 class ShardError(CrackgenError, ValueError):
     """A shard (or a sample going into one) that is bad; the message names the shard file."""
@@ -77,13 +72,6 @@ def sample_key(shard: int, sample: int) -> str:
     if shard < 0 or sample < 0:
         raise ValueError(f"shard and sample numbers must be >= 0, got {shard}, {sample}")
     return f"{shard:06d}-{sample:05d}"
-
-
-def out_name(member: str) -> str:
-    """Name a decoded member is yielded under: ``rgb.png`` -> ``rgb``, ``json`` -> ``meta``."""
-    if member == "json":
-        return "meta"
-    return member.rsplit(".", 1)[0] if "." in member else member
 
 
 # ================================================================ writer
@@ -123,27 +111,30 @@ def _check_members(key: str, members: Mapping[str, Any]) -> None:
             raise ShardError(f"{key}.{name}: member name needs an extension (e.g. '{name}.png')")
         if isinstance(value, (bytes, bytearray, memoryview)):
             continue
-        base, ext = out_name(name), member_ext(name)
-        if base in _RGB_MEMBERS and ext == "png":
+        kind = member_for_file(name)
+        codec = kind.codec if kind is not None else None
+        if codec is Codec.PNG_RGB:
             a = np.asarray(value)
             if a.dtype != np.uint8 or a.ndim != 3 or a.shape[2] != 3:
                 raise ShardError(f"{key}.{name}: must be uint8 H×W×3 RGB, got {a.dtype} {a.shape}")
-        elif base == "mask" and ext == "png":
+        elif codec is Codec.PNG_MASK:
             a = np.asarray(value)
             if a.dtype != np.uint8 or a.ndim != 2:
                 raise ShardError(f"{key}.{name}: must be uint8 H×W, got {a.dtype} {a.shape}")
             if not np.isin(a, (0, 255)).all():
                 raise ShardError(f"{key}.{name}: mask values must be 0 or 255, found {np.unique(a)[:8].tolist()}")
-        elif base in _FLOAT_MEMBERS and ext == "exr":
+        elif codec is Codec.EXR_FLOAT:
             a = np.asarray(value)
             if a.ndim != 2 or a.dtype.kind != "f":
                 raise ShardError(f"{key}.{name}: must be a float H×W map, got {a.dtype} {a.shape}")
-        elif base == "tofraw" and ext == "exr":
-            if not isinstance(value, Mapping) or not {"Z", "A"} <= set(value):
-                raise ShardError(f"{key}.{name}: must be a dict with channels 'Z' (range) and 'A' (amplitude)")
-        elif name == "json" and not isinstance(value, (Mapping, str)):
+        elif codec is Codec.EXR_CHANNELS:
+            if not isinstance(value, Mapping) or not set(kind.channels) <= set(value):
+                wanted = " and ".join(repr(c) for c in kind.channels)
+                raise ShardError(f"{key}.{name}: must be a dict with channels {wanted}")
+        elif codec is Codec.JSON and not isinstance(value, (Mapping, str)):
             raise ShardError(f"{key}.json: metadata must be a dict, got {type(value).__name__}")
-        if base in _VIEW_MEMBERS and isinstance(value, np.ndarray) and value.ndim >= 2:
+        view = member_for_name(name)
+        if view is not None and view.in_rgb_view and isinstance(value, np.ndarray) and value.ndim >= 2:
             shapes[name] = value.shape[:2]
     if len(set(shapes.values())) > 1:
         raise ShardError(f"{key}: RGB-view members differ in size: {shapes}")
@@ -398,8 +389,7 @@ def _normalise_members(members: Iterable[str] | None) -> set[str] | None:
         members = [members]
     out = set()
     for m in members:
-        m = "meta" if m in ("json", "meta") else out_name(m)
-        out.add(m)
+        out.add(out_name(m))  # "json" and "meta" both name the metadata
     return out
 
 

@@ -12,7 +12,6 @@ import uuid
 import numpy as np
 import pytest
 
-from crackgen.shards.manifest import Manifest, ManifestError, ShardInfo
 from crackgen.shards import (
     ShardError,
     ShardWriter,
@@ -24,6 +23,7 @@ from crackgen.shards import (
     split_shards,
     verify_dataset,
 )
+from crackgen.shards.manifest import Manifest, ManifestError, ShardInfo
 
 H, W = 12, 16
 ALL_MEMBERS = ["crackmap.exr", "depth.exr", "disp_gt.exr", "disp_sgm.exr", "json", "lidar.exr",
