@@ -196,3 +196,32 @@ def test_deterministic_given_seed_and_needs_tof(box_scene):
     np.testing.assert_array_equal(a.depth_rgb, b.depth_rgb)
     with pytest.raises(SensorError, match="no ToF camera"):
         simulate_tof(spec, make_test_rig(rgb, None), box_scene, constant_albedo(0.5), sensor_rng(0))
+
+
+@pytest.mark.parametrize("sigma0,k", [(0.0, 2.4e-6), (0.001, 2.4e-6), (0.002, 0.0), (0.0, 0.0)])
+def test_zero_amplitude_returns_are_dropped_not_perfect(plane_scene, sigma0, k):
+    # Left half of the plane (x < 0, u < 0.5) is black: its returns carry no light, so sigma = k d^2 / 0
+    # is infinite. With min_amplitude = 0 (dropout off) they must still be no measurement (-1), while
+    # the grey half keeps its noise at sigma0 + k d^2 / A.
+    albedo = 0.2
+    rgb = down_camera(1.5, 64, 48, 60)
+    spec = tof_spec(width_px=200, height_px=150, sigma0_m=sigma0, k_noise=k, min_amplitude=0.0)
+    half_black = lambda uv: np.where(uv[:, 0] < 0.5, 0.0, albedo)  # noqa: E731
+    res = simulate_tof(spec, make_test_rig(rgb, spec), plane_scene, half_black, sensor_rng(4))
+    cam = res.camera
+    d, cos_inc = plane_rays(cam)  # independent geometry
+    _, dirs, _ = cam.pixel_rays()
+    x = (cam.center[0] + dirs[:, 0] * d.ravel()).reshape(d.shape)
+    black, grey = x < -1e-3, x > 1e-3
+    assert black.sum() > 1000 and grey.sum() > 1000
+    assert not res.valid[black].any()
+    assert (res.range_m[black] == -1).all() and (res.depth_m[black] == -1).all()
+    assert (res.points_world[:, 0] > -1e-3).all()  # nothing from the black half reaches the RGB view
+    assert res.valid[grey].all()
+    sig = sigma0 + k * d**2 / (spec.amplitude_scale * albedo * cos_inc / d**2)
+    resid = (res.range_m - d)[grey]
+    if sigma0 == 0 and k == 0:
+        assert np.abs(resid).max() < 1e-5
+    else:
+        z = resid / sig[grey]
+        assert abs(z.std() - 1) < 0.1 and abs(z.mean()) < 0.05

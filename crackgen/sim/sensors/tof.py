@@ -16,7 +16,8 @@ Model, per ToF pixel (each part switchable from ``TofSpec``):
 * range noise: Gaussian with sigma = sigma0 + k * d^2 / A (shot noise grows as
   the return weakens; defaults give BlenSor's 4 mm at 5 m for albedo 0.5);
 * per-sample bias, then phase wrap: range mod wrap_range_m;
-* dropout: amplitude < min_amplitude or theta > grazing.
+* dropout: amplitude < min_amplitude or theta > grazing; a return with no
+  amplitude (A = 0) is always dropped, even with min_amplitude = 0.
 
 The measured points go to world and are splatted into the RGB view with the
 z-buffer of ``fusion.projection`` (thesis eq. 5.7-5.9).
@@ -29,10 +30,10 @@ from typing import Callable
 import cv2
 import numpy as np
 
+from crackgen.config.spec import TofSpec
 from crackgen.errors import CrackgenError
 from crackgen.sim.raycast import MeshRaycaster
 from crackgen.sim.rig import Rig
-from crackgen.config.spec import TofSpec
 from fusion.camera import Camera
 from fusion.projection import project_points
 
@@ -208,12 +209,15 @@ def simulate_tof(
             t[cand], amp[cand], cos_inc[cand] = r_mix, a_mix, c_mix
             mixed[cand] = True
 
-    hit = np.isfinite(t)
+    # A return without light (A = 0: black albedo, or mixed phasors that cancel) is
+    # no measurement: its sigma is infinite, so it is dropped, never kept as a noise-free range.
+    hit = np.isfinite(t) & (amp > 0)
     meas = np.where(hit, t, np.nan)
     noise = rng.standard_normal(h * w)  # drawn for every pixel: the stream never depends on the scene
     if spec.sigma0_m > 0 or spec.k_noise > 0:
-        sig = np.where(hit, range_sigma(spec, np.where(hit, t, 1.0), np.where(hit, amp, 1.0)), 0.0)
-        meas = meas + noise * np.where(np.isfinite(sig), sig, 0.0)
+        sig = np.where(hit, range_sigma(spec, np.where(hit, t, 1.0), np.where(hit, amp, 1.0)), np.inf)
+        hit &= np.isfinite(sig)
+        meas = np.where(hit, meas + noise * np.where(hit, sig, 0.0), np.nan)
     meas = meas + spec.bias_m
     if spec.wrap_range_m > 0:
         meas = np.mod(meas, spec.wrap_range_m)
