@@ -3,8 +3,10 @@
 Every field has a default and a unit in its name (``_m``, ``_deg``, ``_px``,
 ``_k``, ``_w``) or in its doc. Random parameters are distributions:
 a constant, ``{min = a, max = b}`` (uniform) or ``{choices = [...], weights = [...]}``.
-Unknown keys are errors. ``load_recipe`` refuses a bad recipe before any work,
-with one ``field.path: problem`` line per problem (``RecipeError``).
+Unknown keys are errors, and so is any number that is not finite (TOML has ``nan``
+and ``inf`` literals, and a NaN slips through every ``<``/``>`` range check).
+``load_recipe`` refuses a bad recipe before any work, with one
+``field.path: problem`` line per problem (``RecipeError``).
 """
 from __future__ import annotations
 
@@ -54,6 +56,7 @@ class Dist(BaseModel):
 
     @model_validator(mode="after")
     def _check_form(self) -> "Dist":
+        _check_finite(self)
         forms = [self.value is not None, self.min is not None or self.max is not None, self.choices is not None]
         if sum(forms) != 1:
             raise PydanticCustomError("dist", "give a constant, {min, max} or {choices, weights}")
@@ -61,8 +64,6 @@ class Dist(BaseModel):
             if self.min is None or self.max is None:
                 missing = "min" if self.min is None else "max"
                 raise PydanticCustomError("dist_sub", "{sub}: required with a range", {"sub": missing})
-            if not (math.isfinite(self.min) and math.isfinite(self.max)):
-                raise PydanticCustomError("dist", "min and max must be finite")
             if not self.max > self.min:
                 raise PydanticCustomError("dist_sub", "{sub}: must be > {ref}", {"sub": "max", "ref": "min"})
         if forms[2]:
@@ -73,7 +74,7 @@ class Dist(BaseModel):
                     raise PydanticCustomError(
                         "dist_sub", "{sub}: must have one weight per choice", {"sub": "weights"}
                     )
-                if any(w < 0 or not math.isfinite(w) for w in self.weights) or sum(self.weights) <= 0:
+                if any(w < 0 for w in self.weights) or sum(self.weights) <= 0:
                     raise PydanticCustomError(
                         "dist_sub", "{sub}: must be >= 0 with a positive sum", {"sub": "weights"}
                     )
@@ -109,13 +110,31 @@ class Dist(BaseModel):
         return f"uniform[{self.min:g}, {self.max:g}]"
 
 
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _check_finite(d: Dist) -> None:
+    """Refuse NaN/inf anywhere in a distribution, naming the part (constant, min, max, choices, weights)."""
+    if _is_number(d.value) and not math.isfinite(d.value):
+        raise PydanticCustomError("dist", f"must be a finite number, got {d.value!r}", {})
+    for sub in ("min", "max"):
+        v = getattr(d, sub)
+        if v is not None and not math.isfinite(v):
+            raise PydanticCustomError("dist_sub", f"{{sub}}: must be a finite number, got {v!r}", {"sub": sub})
+    for sub in ("choices", "weights"):
+        bad = [v for v in getattr(d, sub) or [] if _is_number(v) and not math.isfinite(v)]
+        if bad:
+            raise PydanticCustomError("dist_sub", f"{{sub}}: every entry must be a finite number, got {bad[0]!r}", {"sub": sub})
+
+
 def _numeric(lo: float, hi: float, integer: bool = False, lo_open: bool = False) -> Callable[[Dist], Dist]:
     def check(d: Dist) -> Dist:
         for v in d.support():
-            if isinstance(v, bool) or not isinstance(v, (int, float)):
-                raise PydanticCustomError("dist", "must be a number, got {v!r}", {"v": v})
+            if not _is_number(v):
+                raise PydanticCustomError("dist", f"must be a number, got {v!r}", {})
             if integer and d.min is None and float(v) != int(v):
-                raise PydanticCustomError("dist", "must be an integer, got {v!r}", {"v": v})
+                raise PydanticCustomError("dist", f"must be an integer, got {v!r}", {})
             if (v <= lo if lo_open else v < lo) or v > hi:
                 lb = "(" if lo_open else "["
                 raise PydanticCustomError("dist", f"must be within {lb}{lo:g}, {hi:g}], got {v!r}", {})
@@ -139,7 +158,8 @@ def _one_of(*allowed: str) -> Callable[[Dist], Dist]:
 
 
 class Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_default=True)
+    # allow_inf_nan=False: plain float fields refuse nan/inf (pydantic's ge/le pass NaN otherwise)
+    model_config = ConfigDict(extra="forbid", validate_default=True, allow_inf_nan=False)
 
 
 # Field helpers: _t = numeric distribution type with range, _c = categorical type, _d = default + doc.
@@ -346,6 +366,8 @@ def _format_errors(err: ValidationError) -> list[str]:
         ctx = e.get("ctx") or {}
         if e["type"] == "extra_forbidden":
             lines.append(f"{loc}: unknown key")
+        elif e["type"] == "finite_number":
+            lines.append(f"{loc}: must be a finite number, got {e['input']!r}")
         elif "sub" in ctx:
             text = e["msg"].split(": ", 1)[1]
             if "ref" in ctx:

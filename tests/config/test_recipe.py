@@ -64,6 +64,65 @@ def test_bad_recipes_name_the_field(text, expected):
     assert any(expected in line for line in lines), lines
 
 
+@pytest.mark.parametrize("bad", ["nan", "inf", "-inf"])
+@pytest.mark.parametrize(
+    "template, where",
+    [
+        ("[crack]\nthreshold = {v}", "crack.threshold"),  # constant distribution
+        ("[crack]\ndepth_m = {v}", "crack.depth_m"),
+        ("[camera]\ntilt_deg = {v}", "camera.tilt_deg"),
+        ("[camera]\ntilt_deg = {{min = {v}, max = 10}}", "camera.tilt_deg.min"),
+        ("[crack]\nthreshold = {{min = 0.01, max = {v}}}", "crack.threshold.max"),
+        ("[crack]\nthreshold = {{choices = [0.02, {v}]}}", "crack.threshold.choices"),
+        ("[crack]\noctaves = {{choices = [4, {v}]}}", "crack.octaves.choices"),  # integer parameter
+        ("[material]\nfamily = {{choices = ['asphalt', 'steel'], weights = [1, {v}]}}", "material.family.weights"),
+        ("[shadow]\nprobability = {v}", "shadow.probability"),  # plain float fields
+        ("[tof]\nsigma0_m = {v}", "tof.sigma0_m"),
+        ("[tof]\nhfov_deg = {v}", "tof.hfov_deg"),
+        ("[lidar]\nmax_range_m = {v}", "lidar.max_range_m"),
+        ("[camera]\nsensor_width_mm = {v}", "camera.sensor_width_mm"),
+        ("[material.distractors]\nstain = {v}", "material.distractors.stain"),
+        ("[dataset]\nsamples = {v}", "dataset.samples"),  # plain int field
+    ],
+)
+def test_non_finite_numbers_are_refused_naming_the_field(template, where, bad):
+    lines = problems(template.format(v=bad))
+    assert len(lines) == 1, lines
+    assert lines[0].startswith(f"{where}: ") and "must be a finite number, got" in lines[0], lines
+    assert lines[0].endswith(f"got {bad}"), lines
+
+
+def test_every_float_field_refuses_nan():
+    # Walk the schema so a new float field (distribution or plain) cannot slip past the finite check.
+    from pydantic import BaseModel
+
+    def walk(model: BaseModel, prefix: list[str]):
+        for name in type(model).model_fields:
+            sub = getattr(model, name)
+            if isinstance(sub, BaseModel) and not isinstance(sub, Dist):
+                yield from walk(sub, prefix + [name])
+            elif isinstance(sub, Dist) and any(isinstance(v, (int, float)) and not isinstance(v, bool) for v in sub.support()):
+                yield prefix + [name]
+            elif isinstance(sub, float):
+                yield prefix + [name]
+
+    paths = list(walk(Recipe(), []))
+    assert len(paths) > 40
+    for path in paths:
+        *sections, key = path
+        lines = problems(f"[{'.'.join(sections)}]\n{key} = nan\n")
+        assert lines == [f"{'.'.join(path)}: must be a finite number, got nan"], lines
+
+
+def test_validate_cli_refuses_nan(tmp_path, capsys):
+    from crackgen.tools.cli import main
+
+    path = tmp_path / "nan.toml"
+    path.write_text("[crack]\nthreshold = nan\n")
+    assert main(["validate", str(path)]) != 0
+    assert capsys.readouterr().err.strip() == "crack.threshold: must be a finite number, got nan"
+
+
 def test_every_problem_is_reported_once_per_line():
     lines = problems("[crack]\nthresold = 1\n[camera]\ntilt_deg = 200\n")
     assert len(lines) == 2
@@ -173,7 +232,7 @@ def test_random_invalid_recipes_are_refused_with_field_name(item):
 
 
 def test_recipe_families_match_asset_files():
-    from crackgen.procedural.materials import list_families
     from crackgen.config.recipe import FAMILIES
+    from crackgen.procedural.materials import list_families
 
     assert sorted(FAMILIES) == list_families()
