@@ -42,11 +42,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     try:
         if args.command == "seg":
-            from trainer.train import train
-
             import torch.distributed as dist
 
-            res = train(args)
+            from trainer.train import main as train_main
+
+            res = train_main(args)
             if not (dist.is_available() and dist.is_initialized()) or dist.get_rank() == 0:
                 print(json.dumps({k: res[k] for k in ("step", "epoch", "best", "out")}))
             if dist.is_available() and dist.is_initialized():

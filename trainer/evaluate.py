@@ -23,7 +23,7 @@ from trainer.metrics import plot_pr_curve
 from trainer.models import SegModel, build_model
 from trainer.sources import ShardSource
 from trainer.stream import SegStream
-from trainer.train import evaluate_model
+from trainer.train import evaluate
 
 
 def add_eval_args(p: argparse.ArgumentParser) -> None:
@@ -67,7 +67,7 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     real = real_folder(args, args.real) if args.real else None
     ds = SegStream(cfg, shards, real, train=False, seed=args.seed, skip_bad=args.skip_bad)
     amp = device.type == "cuda"
-    hist = evaluate_model(model, eval_loader(ds, args.workers, device), device, amp, progress=not args.no_progress)
+    hist = evaluate(model, eval_loader(ds, args.workers, device), device, amp, progress=not args.no_progress)
     summary = hist.summary(args.threshold)
     out = Path(args.out) if args.out else Path(args.checkpoint).parent / "eval"
     out.mkdir(parents=True, exist_ok=True)

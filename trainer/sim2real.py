@@ -23,7 +23,8 @@ from trainer.errors import TrainerInputError
 from trainer.evaluate import load_model
 from trainer.sources import split_fraction
 from trainer.stream import SegStream
-from trainer.train import add_seg_args, evaluate_model, train
+from trainer.train import add_seg_args, evaluate
+from trainer.train import main as train_seg
 
 log = logging.getLogger(__name__)
 
@@ -86,10 +87,10 @@ def run_sim2real(args: argparse.Namespace) -> dict[str, Any]:
             continue
         seg = _seg_args(args, out / name, data, real, train_stems if real else None)
         log.info("sim2real: training '%s'", name)
-        info = train(seg)
+        info = train_seg(seg)
         model, cfg, _ = load_model(out / name / "checkpoint.pt", device)
         ds = SegStream(cfg, None, test, train=False, seed=args.seed, skip_bad=args.skip_bad)
-        hist = evaluate_model(model, eval_loader(ds, args.workers, device), device, device.type == "cuda")
+        hist = evaluate(model, eval_loader(ds, args.workers, device), device, device.type == "cuda")
         s = hist.summary(0.5)
         results[name] = {"steps": info["step"], "train_seconds": round(info["seconds"], 1),
                          "best": s["best"], "at_0.5": s["at_threshold"]}

@@ -30,7 +30,6 @@ import logging
 from typing import Any, Iterator
 
 import numpy as np
-import torch
 import torch.distributed as dist
 from torch.utils.data import IterableDataset, get_worker_info
 

@@ -7,6 +7,12 @@ real set is repeated N times, N the largest value with N*|real| < |synthetic|
 ``--val-fraction`` of the training sources) picks ``best.pt`` by F1 at the
 best threshold. ``--resume`` continues exactly: same next batches, same step.
 Runs under ``torchrun`` (DDP; gloo on CPU, nccl on CUDA).
+
+Shape, as in torchvision's reference: ``build_*`` helpers make the pieces,
+``train_one_epoch`` runs the (rest of the) current epoch, ``evaluate`` scores a
+model on a loader, and ``main`` wires them. The mutable position of the run
+lives in one ``TrainState`` (what a checkpoint needs to resume step-exactly);
+the fixed pieces live in one ``Run``. Steps receive both explicitly.
 """
 from __future__ import annotations
 
@@ -17,8 +23,9 @@ import logging
 import math
 import os
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import torch
 import torch.distributed as dist
@@ -37,6 +44,9 @@ from trainer.stream import SegStream, dist_info, mix_repeat
 
 log = logging.getLogger(__name__)
 
+# Arguments that fix the data order, augmentation and model shape: a resume must not change them.
+RESUME_FIXED_ARGS = ("arch", "depth", "valid_channel", "seed", "batch_size", "workers")
+
 
 def add_seg_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", default=None, help="synthetic dataset folder (shards) or one .tar")
@@ -44,7 +54,8 @@ def add_seg_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--real-repeat", type=int, default=None, help="repeat the real set N times (default: thesis rule)")
     p.add_argument("--val-data", default=None, help="synthetic validation shards")
     p.add_argument("--val-real", default=None, help="real validation folder")
-    p.add_argument("--val-fraction", type=float, default=0.0, help="hold out this fraction of --data/--real for validation")
+    p.add_argument("--val-fraction", type=float, default=0.0,
+                   help="hold out this fraction of --data/--real for validation")
     p.add_argument("--split-seed", type=int, default=0)
     p.add_argument("--arch", choices=ARCHS, default="deeplabv3_resnet50")
     p.add_argument("--loss", choices=LOSSES, default="bce")
@@ -71,69 +82,16 @@ def add_seg_args(p: argparse.ArgumentParser) -> None:
     add_data_args(p)
 
 
-def init_distributed() -> tuple[torch.device, bool]:
-    """Init DDP from torchrun's env vars when WORLD_SIZE > 1; returns (device, distributed)."""
-    world = int(os.environ.get("WORLD_SIZE", "1"))
-    local = int(os.environ.get("LOCAL_RANK", "0"))
-    cuda = torch.cuda.is_available()
-    if world > 1 and not (dist.is_available() and dist.is_initialized()):
-        if cuda:
-            torch.cuda.set_device(local)
-        dist.init_process_group(backend="nccl" if cuda else "gloo")
-    return torch.device("cuda", local) if cuda else torch.device("cpu"), world > 1
+# ------------------------------------------------------------------ state and logging
 
+@dataclass
+class TrainState:
+    """Where the run stands; stored in every checkpoint so ``--resume`` continues at the next batch."""
 
-def _sources(args: argparse.Namespace) -> tuple[SegStream, SegStream | None]:
-    cfg = sample_config_from_args(args)
-    if not args.data and not args.real:
-        raise TrainerInputError("give training data: --data SHARDS and/or --real FOLDER")
-    frac = args.val_fraction
-    syn = val_syn = None
-    if args.data:
-        syn = ShardSource(Path(args.data), args.depth, frac, "train" if frac > 0 else "all", args.split_seed)
-        if frac > 0:
-            val_syn = ShardSource(Path(args.data), args.depth, frac, "val", args.split_seed)
-    real = val_real = None
-    if args.real:
-        real, val_real = real_split(args, args.real, frac, args.split_seed, getattr(args, "real_stems", None))
-    if args.val_data:
-        val_syn = ShardSource(Path(args.val_data), args.depth)
-    if args.val_real:
-        val_real = real_split(args, args.val_real, 0.0, 0)[0]
-    repeat = args.real_repeat or (mix_repeat(len(real), len(syn)) if (real is not None and syn is not None) else 1)
-    train_ds = SegStream(cfg, syn, real, real_repeat=repeat, batch_size=args.batch_size, train=True,
-                         seed=args.seed, skip_bad=args.skip_bad)
-    eval_cfg = SampleConfig(**{**cfg.__dict__, "crop": None})
-    return train_ds, eval_stream(args, eval_cfg, val_syn, val_real)
-
-
-@torch.no_grad()
-def evaluate_model(model: torch.nn.Module, loader: DataLoader, device: torch.device, amp: bool = False,
-                   progress: bool = False, on_batch: Any = None) -> ConfusionHistogram:
-    """Dataset-level histogram of probabilities (summed over DDP ranks)."""
-    model.eval()
-    hist = ConfusionHistogram.empty()
-    for batch in tqdm(loader, desc="eval", disable=not progress, leave=False):
-        x = batch["image"].to(device, non_blocking=True)
-        target = batch.get("mask_full", batch["mask"]).to(device)
-        with torch.autocast(device_type=device.type, dtype=torch.float16, enabled=amp):
-            logits = model(x)
-        if logits.shape[-2:] != target.shape[-2:]:
-            logits = torch.nn.functional.interpolate(logits.float(), size=target.shape[-2:], mode="bilinear", align_corners=False)
-        prob = torch.sigmoid(logits.float())
-        hist.update(prob, target)
-        if on_batch is not None:
-            on_batch(batch, prob)
-    hist.all_reduce()
-    return hist
-
-
-def _scheduler(args: argparse.Namespace, opt: torch.optim.Optimizer, total: int) -> torch.optim.lr_scheduler.LRScheduler:
-    if args.lr_scheduler == "poly":
-        return torch.optim.lr_scheduler.PolynomialLR(opt, total_iters=total, power=0.9)
-    if args.lr_scheduler == "cosine":
-        return torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=total)
-    return torch.optim.lr_scheduler.ConstantLR(opt, factor=1.0, total_iters=0)
+    epoch: int = 0
+    batch_in_epoch: int = 0
+    step: int = 0
+    best: dict[str, Any] = field(default_factory=lambda: {"f1": -1.0})
 
 
 class _Logger:
@@ -170,7 +128,276 @@ class _Logger:
                 self.tb.close()
 
 
-def train(args: argparse.Namespace) -> dict[str, Any]:
+@dataclass
+class Run:
+    """The fixed pieces of one training run, built once by ``main`` and handed to each step."""
+
+    args: argparse.Namespace
+    out: Path
+    device: torch.device
+    amp: bool
+    main_proc: bool
+    world: int
+    cfg: SampleConfig
+    model: torch.nn.Module  # what runs forward (DDP-wrapped under torchrun)
+    bare: torch.nn.Module  # the unwrapped model whose state_dict is saved
+    optimizer: torch.optim.Optimizer
+    lr_scheduler: torch.optim.lr_scheduler.LRScheduler
+    scaler: torch.amp.GradScaler
+    criterion: Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
+    logger: _Logger
+    progress: bool
+    steps_per_epoch: int
+    epochs: int
+    total_steps: int
+
+
+# ------------------------------------------------------------------ setup helpers
+
+def init_distributed() -> tuple[torch.device, bool]:
+    """Init DDP from torchrun's env vars when WORLD_SIZE > 1; returns (device, distributed)."""
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    local = int(os.environ.get("LOCAL_RANK", "0"))
+    cuda = torch.cuda.is_available()
+    if world > 1 and not (dist.is_available() and dist.is_initialized()):
+        if cuda:
+            torch.cuda.set_device(local)
+        dist.init_process_group(backend="nccl" if cuda else "gloo")
+    return torch.device("cuda", local) if cuda else torch.device("cpu"), world > 1
+
+
+def load_resume_checkpoint(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The ``--resume`` checkpoint, refused when an argument that fixes the data order changed."""
+    if not args.resume:
+        return None
+    ckpt = load_checkpoint(args.resume)
+    if args.test_only:
+        return ckpt
+    for k in RESUME_FIXED_ARGS:
+        if k in ckpt["args"] and ckpt["args"][k] != getattr(args, k):
+            raise TrainerInputError(f"--{k.replace('_', '-')} {getattr(args, k)!r} differs from the checkpoint's "
+                                    f"{ckpt['args'][k]!r}; exact resume needs the same value")
+    return ckpt
+
+
+def build_datasets(args: argparse.Namespace) -> tuple[SegStream, SegStream | None]:
+    """(training stream, validation stream or None) from the data flags."""
+    cfg = sample_config_from_args(args)
+    if not args.data and not args.real:
+        raise TrainerInputError("give training data: --data SHARDS and/or --real FOLDER")
+    frac = args.val_fraction
+    syn = val_syn = None
+    if args.data:
+        syn = ShardSource(Path(args.data), args.depth, frac, "train" if frac > 0 else "all", args.split_seed)
+        if frac > 0:
+            val_syn = ShardSource(Path(args.data), args.depth, frac, "val", args.split_seed)
+    real = val_real = None
+    if args.real:
+        real, val_real = real_split(args, args.real, frac, args.split_seed, getattr(args, "real_stems", None))
+    if args.val_data:
+        val_syn = ShardSource(Path(args.val_data), args.depth)
+    if args.val_real:
+        val_real = real_split(args, args.val_real, 0.0, 0)[0]
+    repeat = args.real_repeat or (mix_repeat(len(real), len(syn)) if (real is not None and syn is not None) else 1)
+    train_ds = SegStream(cfg, syn, real, real_repeat=repeat, batch_size=args.batch_size, train=True,
+                         seed=args.seed, skip_bad=args.skip_bad)
+    eval_cfg = SampleConfig(**{**cfg.__dict__, "crop": None})
+    return train_ds, eval_stream(args, eval_cfg, val_syn, val_real)
+
+
+def build_network(args: argparse.Namespace, in_channels: int, device: torch.device,
+                  distributed: bool) -> tuple[torch.nn.Module, torch.nn.Module]:
+    """(model to run, bare model to save): seeded init, channels_last on CUDA, SyncBN/DDP under torchrun."""
+    torch.manual_seed(args.seed)
+    model = build_model(args.arch, in_channels).to(device)
+    if device.type == "cuda":
+        model = model.to(memory_format=torch.channels_last)
+    if distributed and args.sync_bn:
+        model = torch.nn.SyncBatchNorm.convert_sync_batchnorm(model)
+    bare = model
+    if distributed:
+        ids = [device.index] if device.type == "cuda" else None
+        model = torch.nn.parallel.DistributedDataParallel(model, device_ids=ids)
+    return model, bare
+
+
+def step_budget(args: argparse.Namespace, steps_per_epoch: int) -> tuple[int, int]:
+    """(epochs, total steps): ``--epochs`` of full epochs, or enough epochs to cover ``--max-steps``."""
+    if args.max_steps is None:
+        return args.epochs, args.epochs * steps_per_epoch
+    return math.ceil(args.max_steps / steps_per_epoch), args.max_steps
+
+
+def build_lr_scheduler(args: argparse.Namespace, opt: torch.optim.Optimizer,
+                       total: int) -> torch.optim.lr_scheduler.LRScheduler:
+    if args.lr_scheduler == "poly":
+        return torch.optim.lr_scheduler.PolynomialLR(opt, total_iters=total, power=0.9)
+    if args.lr_scheduler == "cosine":
+        return torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=total)
+    return torch.optim.lr_scheduler.ConstantLR(opt, factor=1.0, total_iters=0)
+
+
+def restore(ckpt: dict[str, Any] | None, bare: torch.nn.Module, opt: torch.optim.Optimizer,
+            sched: torch.optim.lr_scheduler.LRScheduler, scaler: torch.amp.GradScaler, amp: bool,
+            weights_only: bool) -> TrainState:
+    """Load weights and, unless ``weights_only`` (--test-only), optimizer, schedule, position and RNG."""
+    state = TrainState()
+    if ckpt is None:
+        return state
+    bare.load_state_dict(ckpt["model"])
+    if weights_only:
+        return state
+    opt.load_state_dict(ckpt["optimizer"])
+    sched.load_state_dict(ckpt["lr_scheduler"])
+    if amp and ckpt.get("scaler"):
+        scaler.load_state_dict(ckpt["scaler"])
+    state.epoch, state.batch_in_epoch, state.step = ckpt["epoch"], ckpt["batch_in_epoch"], ckpt["step"]
+    state.best = ckpt.get("best", state.best)
+    set_rng_state(ckpt["rng"])
+    return state
+
+
+def checkpoint_payload(run: Run, state: TrainState) -> dict[str, Any]:
+    """torchvision-layout checkpoint plus what step-exact resume needs (see ``trainer.checkpoint``)."""
+    return {
+        "model": run.bare.state_dict(), "optimizer": run.optimizer.state_dict(),
+        "lr_scheduler": run.lr_scheduler.state_dict(), "scaler": run.scaler.state_dict() if run.amp else None,
+        "epoch": state.epoch, "batch_in_epoch": state.batch_in_epoch, "step": state.step, "args": vars(run.args),
+        "sample_config": run.cfg.__dict__, "rng": rng_state(), "best": state.best, "world_size": run.world,
+    }
+
+
+# ------------------------------------------------------------------ steps
+
+@torch.no_grad()
+def evaluate(model: torch.nn.Module, loader: DataLoader, device: torch.device, amp: bool = False,
+             progress: bool = False, on_batch: Callable[[dict, torch.Tensor], None] | None = None
+             ) -> ConfusionHistogram:
+    """Dataset-level histogram of probabilities (summed over DDP ranks)."""
+    model.eval()
+    hist = ConfusionHistogram.empty()
+    for batch in tqdm(loader, desc="eval", disable=not progress, leave=False):
+        x = batch["image"].to(device, non_blocking=True)
+        target = batch.get("mask_full", batch["mask"]).to(device)
+        with torch.autocast(device_type=device.type, dtype=torch.float16, enabled=amp):
+            logits = model(x)
+        if logits.shape[-2:] != target.shape[-2:]:
+            logits = torch.nn.functional.interpolate(logits.float(), size=target.shape[-2:], mode="bilinear",
+                                                     align_corners=False)
+        prob = torch.sigmoid(logits.float())
+        hist.update(prob, target)
+        if on_batch is not None:
+            on_batch(batch, prob)
+    hist.all_reduce()
+    return hist
+
+
+def validate(run: Run, val_ds: SegStream | None, state: TrainState) -> dict[str, Any] | None:
+    """Score the model on the validation stream (every rank), log it, and leave the model in train mode."""
+    if val_ds is None:
+        return None
+    hist = evaluate(run.model, eval_loader(val_ds, run.args.workers, run.device), run.device, run.amp, run.progress)
+    summary = hist.summary(0.5)
+    for k in ("f1", "iou", "precision", "recall"):
+        run.logger.scalar("val", k, summary["best"][k], state.step, state.epoch)
+    run.logger.scalar("val", "best_threshold", summary["best"]["threshold"], state.step, state.epoch)
+    run.model.train()
+    return summary
+
+
+def record_validation(run: Run, state: TrainState, summary: dict[str, Any] | None) -> None:
+    """On rank 0: keep ``best.pt`` for the best F1 so far and write ``metrics_val.json``."""
+    if summary is None or not run.main_proc:
+        return
+    b = summary["best"]
+    if b["f1"] > state.best.get("f1", -1.0):
+        state.best = {**b, "step": state.step, "epoch": state.epoch}
+        save_checkpoint(run.out / "best.pt", checkpoint_payload(run, state))
+    latest = {k: v for k, v in summary.items() if k != "pr_curve"}
+    (run.out / "metrics_val.json").write_text(json.dumps(
+        {"step": state.step, "epoch": state.epoch, "latest": latest, "best": state.best}, indent=2))
+
+
+def train_step(run: Run, batch: dict[str, Any]) -> float:
+    """One optimizer step on one batch (AMP and channels_last on CUDA); returns the loss."""
+    x = batch["image"].to(run.device, non_blocking=True)
+    y = batch["mask"].to(run.device, non_blocking=True)
+    if run.device.type == "cuda":
+        x = x.contiguous(memory_format=torch.channels_last)
+    with torch.autocast(device_type=run.device.type, dtype=torch.float16, enabled=run.amp):
+        logits = run.model(x)
+    loss = run.criterion(logits, y)
+    run.optimizer.zero_grad(set_to_none=True)
+    run.scaler.scale(loss).backward()
+    run.scaler.step(run.optimizer)
+    run.scaler.update()
+    run.lr_scheduler.step()
+    return float(loss.detach())
+
+
+def train_one_epoch(run: Run, train_ds: SegStream, val_ds: SegStream | None, state: TrainState,
+                    loader_gen: torch.Generator, bar: tqdm) -> None:
+    """Train the rest of ``state.epoch`` (from ``state.batch_in_epoch``), stopping at the step budget.
+
+    Validates every ``--val-every`` steps; the epoch-end validation is ``main``'s.
+    """
+    args = run.args
+    train_ds.set_epoch(state.epoch, skip_batches=state.batch_in_epoch)
+    loader = DataLoader(train_ds, batch_size=args.batch_size, num_workers=args.workers,
+                        pin_memory=run.device.type == "cuda", generator=loader_gen,
+                        persistent_workers=False, prefetch_factor=2 if args.workers > 0 else None)
+    for batch in loader:
+        lv = train_step(run, batch)
+        state.step += 1
+        state.batch_in_epoch += 1
+        if not math.isfinite(lv):
+            raise FloatingPointError(f"loss is {lv} at step {state.step}; lower --lr or check the data")
+        run.logger.scalar("train", "loss", lv, state.step, state.epoch)
+        if state.step % max(1, args.log_every) == 0:
+            run.logger.scalar("train", "lr", run.optimizer.param_groups[0]["lr"], state.step, state.epoch)
+        bar.update(1)
+        bar.set_postfix(loss=f"{lv:.4f}", epoch=state.epoch)
+        if args.val_every and state.step % args.val_every == 0:
+            record_validation(run, state, validate(run, val_ds, state))
+        if state.step >= run.total_steps or state.batch_in_epoch >= run.steps_per_epoch:
+            break
+
+
+def run_test_only(run: Run, val_ds: SegStream | None, state: TrainState) -> dict[str, Any]:
+    """``--test-only``: validate the loaded weights and write ``metrics_val.json``."""
+    summary = validate(run, val_ds, state)
+    if summary is None:
+        raise TrainerInputError("--test-only needs validation data (--val-data/--val-real/--val-fraction)")
+    if run.main_proc:
+        (run.out / "metrics_val.json").write_text(
+            json.dumps({k: v for k, v in summary.items() if k != "pr_curve"}, indent=2))
+    return summary
+
+
+def fit(run: Run, train_ds: SegStream, val_ds: SegStream | None, state: TrainState) -> None:
+    """Epoch loop: train, roll over the epoch, validate at its end (unless --val-every), checkpoint."""
+    loader_gen = torch.Generator().manual_seed(run.args.seed)  # keeps DataLoader seeding off the global RNG
+    run.model.train()
+    bar = tqdm(total=run.total_steps, initial=state.step, desc="train", disable=not run.progress)
+    while state.step < run.total_steps and state.epoch < run.epochs:
+        if state.batch_in_epoch >= run.steps_per_epoch:
+            state.epoch, state.batch_in_epoch = state.epoch + 1, 0
+            continue
+        train_one_epoch(run, train_ds, val_ds, state, loader_gen, bar)
+        if state.batch_in_epoch >= run.steps_per_epoch:
+            state.epoch, state.batch_in_epoch = state.epoch + 1, 0
+            if not run.args.val_every:
+                record_validation(run, state, validate(run, val_ds, state))
+        if run.main_proc:
+            save_checkpoint(run.out / "checkpoint.pt", checkpoint_payload(run, state))
+    bar.close()
+    if run.main_proc:
+        save_checkpoint(run.out / "checkpoint.pt", checkpoint_payload(run, state))
+        if val_ds is not None and state.best.get("f1", -1) < 0:
+            record_validation(run, state, validate(run, val_ds, state))
+
+
+def main(args: argparse.Namespace) -> dict[str, Any]:
     """Run training (or --test-only); returns the final/best validation summary."""
     device, distributed = init_distributed()
     if args.device:
@@ -182,140 +409,32 @@ def train(args: argparse.Namespace) -> dict[str, Any]:
         out.mkdir(parents=True, exist_ok=True)
     if args.crop == 0:
         args.crop = None
-    ckpt = load_checkpoint(args.resume) if args.resume else None
-    if ckpt is not None:
-        for k in ("arch", "depth", "valid_channel", "seed", "batch_size", "workers"):
-            if k in ckpt["args"] and ckpt["args"][k] != getattr(args, k) and not args.test_only:
-                raise TrainerInputError(f"--{k.replace('_', '-')} {getattr(args, k)!r} differs from the checkpoint's {ckpt['args'][k]!r}; exact resume needs the same value")
-    train_ds, val_ds = _sources(args)
-    cfg = train_ds.cfg
-    torch.manual_seed(args.seed)
-    model = build_model(args.arch, cfg.in_channels).to(device)
+    ckpt = load_resume_checkpoint(args)
+    train_ds, val_ds = build_datasets(args)
+    model, bare = build_network(args, train_ds.cfg.in_channels, device, distributed)
     amp = device.type == "cuda" and not args.no_amp
-    if device.type == "cuda":
-        model = model.to(memory_format=torch.channels_last)
-    if distributed and args.sync_bn:
-        model = torch.nn.SyncBatchNorm.convert_sync_batchnorm(model)
-    bare = model
-    if distributed:
-        model = torch.nn.parallel.DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
     spe = train_ds.steps_per_epoch(args.workers)
-    epochs = args.epochs if args.max_steps is None else math.ceil(args.max_steps / spe)
-    total = epochs * spe if args.max_steps is None else args.max_steps
+    epochs, total = step_budget(args, spe)
     opt = torch.optim.Adam(bare.parameters(), lr=args.lr, weight_decay=args.weight_decay)
-    sched = _scheduler(args, opt, total)
+    sched = build_lr_scheduler(args, opt, total)
     scaler = torch.amp.GradScaler("cuda", enabled=amp)
-    loss_fn = make_loss(args.loss)
-    epoch, batch_in_epoch, step = 0, 0, 0
-    best: dict[str, Any] = {"f1": -1.0}
-    if ckpt is not None:
-        bare.load_state_dict(ckpt["model"])
-        if not args.test_only:
-            opt.load_state_dict(ckpt["optimizer"])
-            sched.load_state_dict(ckpt["lr_scheduler"])
-            if amp and ckpt.get("scaler"):
-                scaler.load_state_dict(ckpt["scaler"])
-            epoch, batch_in_epoch, step = ckpt["epoch"], ckpt["batch_in_epoch"], ckpt["step"]
-            best = ckpt.get("best", best)
-            set_rng_state(ckpt["rng"])
-    progress = main_proc and not args.no_progress
-    logger = _Logger(out, main_proc and not args.test_only)
-
-    def validate() -> dict[str, Any] | None:
-        if val_ds is None:
-            return None
-        hist = evaluate_model(model, eval_loader(val_ds, args.workers, device), device, amp, progress)
-        summary = hist.summary(0.5)
-        for k in ("f1", "iou", "precision", "recall"):
-            logger.scalar("val", k, summary["best"][k], step, epoch)
-        logger.scalar("val", "best_threshold", summary["best"]["threshold"], step, epoch)
-        model.train()
-        return summary
-
+    criterion = make_loss(args.loss)
+    state = restore(ckpt, bare, opt, sched, scaler, amp, weights_only=args.test_only)
+    run = Run(args=args, out=out, device=device, amp=amp, main_proc=main_proc, world=world, cfg=train_ds.cfg,
+              model=model, bare=bare, optimizer=opt, lr_scheduler=sched, scaler=scaler, criterion=criterion,
+              logger=_Logger(out, main_proc and not args.test_only), progress=main_proc and not args.no_progress,
+              steps_per_epoch=spe, epochs=epochs, total_steps=total)
     if args.test_only:
-        summary = validate()
-        if summary is None:
-            raise TrainerInputError("--test-only needs validation data (--val-data/--val-real/--val-fraction)")
-        if main_proc:
-            (out / "metrics_val.json").write_text(json.dumps({k: v for k, v in summary.items() if k != "pr_curve"}, indent=2))
-        return summary
-
-    def checkpoint_payload() -> dict[str, Any]:
-        return {
-            "model": bare.state_dict(), "optimizer": opt.state_dict(), "lr_scheduler": sched.state_dict(),
-            "scaler": scaler.state_dict() if amp else None, "epoch": epoch, "batch_in_epoch": batch_in_epoch,
-            "step": step, "args": vars(args), "sample_config": cfg.__dict__, "rng": rng_state(), "best": best,
-            "world_size": world,
-        }
-
-    def after_validation(summary: dict[str, Any] | None) -> None:
-        nonlocal best
-        if summary is None or not main_proc:
-            return
-        b = summary["best"]
-        if b["f1"] > best.get("f1", -1.0):
-            best = {**b, "step": step, "epoch": epoch}
-            save_checkpoint(out / "best.pt", {**checkpoint_payload(), "best": best})
-        (out / "metrics_val.json").write_text(json.dumps(
-            {"step": step, "epoch": epoch, "latest": {k: v for k, v in summary.items() if k != "pr_curve"}, "best": best}, indent=2))
-
+        return run_test_only(run, val_ds, state)
     if main_proc:
-        log.info("training %s on %s, %d steps/epoch, %d steps total, device %s", args.arch, describe(train_ds), spe, total, device)
-    loader_gen = torch.Generator().manual_seed(args.seed)  # keeps DataLoader seeding off the global RNG
-    model.train()
+        log.info("training %s on %s, %d steps/epoch, %d steps total, device %s",
+                 args.arch, describe(train_ds), spe, total, device)
     t0 = time.perf_counter()
-    last_summary = None
-    bar = tqdm(total=total, initial=step, desc="train", disable=not progress)
-    while step < total and epoch < epochs:
-        if batch_in_epoch >= spe:
-            epoch, batch_in_epoch = epoch + 1, 0
-            continue
-        train_ds.set_epoch(epoch, skip_batches=batch_in_epoch)
-        loader = DataLoader(train_ds, batch_size=args.batch_size, num_workers=args.workers,
-                            pin_memory=device.type == "cuda", generator=loader_gen,
-                            persistent_workers=False, prefetch_factor=2 if args.workers > 0 else None)
-        for batch in loader:
-            x = batch["image"].to(device, non_blocking=True)
-            y = batch["mask"].to(device, non_blocking=True)
-            if device.type == "cuda":
-                x = x.contiguous(memory_format=torch.channels_last)
-            with torch.autocast(device_type=device.type, dtype=torch.float16, enabled=amp):
-                logits = model(x)
-            loss = loss_fn(logits, y)
-            opt.zero_grad(set_to_none=True)
-            scaler.scale(loss).backward()
-            scaler.step(opt)
-            scaler.update()
-            sched.step()
-            step += 1
-            batch_in_epoch += 1
-            lv = float(loss.detach())
-            if not math.isfinite(lv):
-                raise FloatingPointError(f"loss is {lv} at step {step}; lower --lr or check the data")
-            logger.scalar("train", "loss", lv, step, epoch)
-            if step % max(1, args.log_every) == 0:
-                logger.scalar("train", "lr", opt.param_groups[0]["lr"], step, epoch)
-            bar.update(1)
-            bar.set_postfix(loss=f"{lv:.4f}", epoch=epoch)
-            if args.val_every and step % args.val_every == 0:
-                last_summary = validate()
-                after_validation(last_summary)
-            if step >= total or batch_in_epoch >= spe:
-                break
-        if batch_in_epoch >= spe:
-            epoch, batch_in_epoch = epoch + 1, 0
-            if not args.val_every:
-                last_summary = validate()
-                after_validation(last_summary)
-        if main_proc:
-            save_checkpoint(out / "checkpoint.pt", checkpoint_payload())
-    bar.close()
-    if main_proc:
-        save_checkpoint(out / "checkpoint.pt", checkpoint_payload())
-        if val_ds is not None and best.get("f1", -1) < 0:
-            after_validation(validate())
-    logger.close()
+    try:
+        fit(run, train_ds, val_ds, state)
+    finally:
+        run.logger.close()
     elapsed = time.perf_counter() - t0
     if main_proc:
-        log.info("done: %d steps in %.1f s; best val F1 %s", step, elapsed, best.get("f1"))
-    return {"step": step, "epoch": epoch, "best": best, "seconds": elapsed, "out": str(out)}
+        log.info("done: %d steps in %.1f s; best val F1 %s", state.step, elapsed, state.best.get("f1"))
+    return {"step": state.step, "epoch": state.epoch, "best": state.best, "seconds": elapsed, "out": str(out)}

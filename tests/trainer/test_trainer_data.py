@@ -53,10 +53,13 @@ def test_disparity_to_depth_and_nearest_alignment_without_bleeding():
 
 
 def test_rgbd_folder_disparity_pipeline(tmp_path):
-    (tmp_path / "images").mkdir(); (tmp_path / "masks").mkdir(); (tmp_path / "disp").mkdir()
+    (tmp_path / "images").mkdir()
+    (tmp_path / "masks").mkdir()
+    (tmp_path / "disp").mkdir()
     cv2.imwrite(str(tmp_path / "images/a.png"), np.full((40, 80, 3), 128, np.uint8))
     cv2.imwrite(str(tmp_path / "masks/a.png"), np.zeros((40, 80), np.uint8))
-    disp = np.full((20, 30), 4.0, np.float32); disp[:, :5] = 0
+    disp = np.full((20, 30), 4.0, np.float32)
+    disp[:, :5] = 0
     cv2.imwrite(str(tmp_path / "disp/a.tif"), disp)
     f = RealFolder(tmp_path, depth_dir="disp", depth_kind="disparity", focal_px=100, baseline_m=0.1)
     s = f.load("a")
@@ -115,7 +118,8 @@ def test_augmentation_is_deterministic_per_sample_generator():
 
 
 def _folder(tmp_path, n=4, bad_size=None):
-    (tmp_path / "images").mkdir(); (tmp_path / "masks").mkdir()
+    (tmp_path / "images").mkdir()
+    (tmp_path / "masks").mkdir()
     for i in range(n):
         cv2.imwrite(str(tmp_path / f"images/{i:03d}.png"), np.full((32, 48, 3), 100, np.uint8))
         shape = (16, 16) if i == bad_size else (32, 48)

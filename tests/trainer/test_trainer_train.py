@@ -10,10 +10,12 @@ import pytest
 from trainer.cli import main
 
 shards = pytest.importorskip("crackgen.shards")
+bench_shards = pytest.importorskip("crackgen.tools.bench_shards")
 
 
 def _real_folder(root: Path, n: int = 8) -> Path:
-    (root / "images").mkdir(parents=True); (root / "masks").mkdir()
+    (root / "images").mkdir(parents=True)
+    (root / "masks").mkdir()
     rng = np.random.default_rng(0)
     for i in range(n):
         img = (rng.random((48, 64, 3)) * 60 + 100).astype(np.uint8)
@@ -31,7 +33,7 @@ def _shards(root: Path, n_shards: int = 2, per_shard: int = 4) -> Path:
     for s in range(n_shards):
         with shards.ShardWriter(root, s) as w:
             for i in range(per_shard):
-                smp = shards.synthetic_sample(rng, 48, 16)
+                smp = bench_shards.synthetic_sample(rng, 48, 16)
                 w.add(shards.sample_key(s, i), {k: smp[k] for k in ("rgb.png", "mask.png", "depth.exr", "tof.exr", "json")})
     return root
 
