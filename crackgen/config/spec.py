@@ -1,7 +1,9 @@
 """SampleSpec: every random draw of one sample, as plain data.
 
-A spec depends only on (recipe, index): ``make_spec`` seeds one numpy Generator
-from ``SeedSequence([recipe.dataset.seed, index])`` and makes every draw there.
+A spec depends only on (recipe, index). The root of a sample's randomness is
+``SeedSequence([recipe.dataset.seed, index])``; each recipe section draws from its
+own child stream of that root (``SECTION_STREAMS``), so switching stereo on, or
+changing the number of lights, never moves the draws of any other section.
 Everything downstream (crack map, materials, renderer, sensors) is a pure
 function of the spec, so output is identical whatever the worker count/order.
 
@@ -19,7 +21,27 @@ from typing import Any
 
 import numpy as np
 
-SPEC_VERSION = 1
+from crackgen.config.recipe import Recipe
+
+# 2: one random stream per section (SECTION_STREAMS) instead of one shared stream.
+SPEC_VERSION = 2
+
+# Stream number of each section's draws: the child SeedSequence([seed, index], spawn_key=(n,)).
+# Append-only: never renumber or reuse a number (that would change every existing dataset);
+# a new section takes the next free number.
+SECTION_STREAMS: dict[str, int] = {
+    "crack": 0,
+    "surface": 1,
+    "material": 2,
+    "lights": 3,
+    "ambient": 4,
+    "shadow": 5,
+    "camera": 6,
+    "stereo": 7,
+    "render": 8,
+    "tof": 9,
+    "lidar": 10,
+}
 
 
 @dataclass
@@ -231,26 +253,29 @@ def local_light_power(kind: str, irradiance_w_m2: float, distance_m: float) -> f
     return float(irradiance_w_m2 * solid * distance_m**2)
 
 
-def sample_rng(recipe_seed: int, index: int) -> np.random.Generator:
-    """The one Generator a sample's draws come from."""
-    return np.random.default_rng(np.random.SeedSequence([int(recipe_seed), int(index)]))
+def section_rng(recipe_seed: int, index: int, section: str) -> np.random.Generator:
+    """The Generator that section ``section`` of sample ``index`` draws from.
+
+    It is the child of the sample's root ``SeedSequence([recipe_seed, index])`` keyed by the
+    section's fixed number: ``SeedSequence(root entropy, spawn_key=(n,))``, which is exactly
+    ``root.spawn(n + 1)[n]``. Keying by a fixed number, rather than spawning a list as long as
+    today's sections, makes each stream depend on nothing but its own number: a section can be
+    drawn alone, in any order, and appending a section to the table leaves the others untouched.
+    """
+    if section not in SECTION_STREAMS:
+        raise ValueError(f"section_rng: unknown section {section!r}; known: {', '.join(SECTION_STREAMS)}")
+    seq = np.random.SeedSequence([int(recipe_seed), int(index)], spawn_key=(SECTION_STREAMS[section],))
+    return np.random.default_rng(seq)
 
 
-def make_spec(recipe: "Recipe", index: int) -> SampleSpec:  # noqa: F821
-    """Draw every random parameter of sample ``index`` of ``recipe``."""
-    from crackgen.config.recipe import Recipe  # local: keeps spec importable alone
+def _seed(rng: np.random.Generator) -> int:
+    """A seed for a downstream Generator (noise, texture, sensor)."""
+    return int(rng.integers(0, 2**31 - 1))
 
-    assert isinstance(recipe, Recipe)
-    rng = sample_rng(recipe.dataset.seed, index)
 
-    def seed() -> int:
-        return int(rng.integers(0, 2**31 - 1))
-
-    def rad(d: float) -> float:
-        return math.radians(d)
-
+def _crack(recipe: Recipe, rng: np.random.Generator) -> CrackSpec:
     c = recipe.crack
-    crack = CrackSpec(
+    return CrackSpec(
         freq_x=c.frequency_x.draw(rng),
         freq_y=c.frequency_y.draw(rng),
         octaves=int(c.octaves.draw(rng)),
@@ -258,54 +283,75 @@ def make_spec(recipe: "Recipe", index: int) -> SampleSpec:  # noqa: F821
         lacunarity=c.lacunarity.draw(rng),
         threshold=c.threshold.draw(rng),
         depth_m=c.depth_m.draw(rng),
-        noise_seed=seed(),
+        noise_seed=_seed(rng),
         offset_u=float(rng.uniform(-1000.0, 1000.0)),
         offset_v=float(rng.uniform(-1000.0, 1000.0)),
     )
-    s = recipe.surface
-    surface = SurfaceSpec(size_m=s.size_m.draw(rng), grid_px=s.grid_px, crackmap_px=s.crackmap_px)
 
+
+def _material(recipe: Recipe, rng: np.random.Generator) -> MaterialSpec:
     m = recipe.material
-    kinds = [k for k in ("joint", "sealant", "stain", "marking") if rng.random() < getattr(m.distractors, k)]
-    material = MaterialSpec(
+    spec = MaterialSpec(
         family=str(m.family.draw(rng)),
-        seed=seed(),
+        seed=_seed(rng),
         texture_px=m.texture_px,
         hue_shift=m.hue_shift.draw(rng),
         value_scale=m.value_scale.draw(rng),
         roughness_offset=m.roughness_offset.draw(rng),
         crack_darkening=m.crack_darkening.draw(rng),
         crack_roughness=m.crack_roughness.draw(rng),
-        distractors=[DistractorSpec(kind=k, seed=seed()) for k in kinds],
     )
+    # Every kind draws its coin and its seed whether present or not, last in the stream: changing
+    # one probability changes only whether that kind appears, never another draw.
+    for kind in ("joint", "sealant", "stain", "marking"):
+        present = rng.random() < getattr(m.distractors, kind)
+        seed = _seed(rng)
+        if present:
+            spec.distractors.append(DistractorSpec(kind=kind, seed=seed))
+    return spec
 
+
+def _lights(recipe: Recipe, rng: np.random.Generator) -> list[LightSpec]:
+    """Count first, then a fixed number of draws per light, so light i is the same for any count > i."""
     li = recipe.lights
     lights = []
     for _ in range(int(li.count.draw(rng))):
-        lights.append(
-            LightSpec(
-                kind=str(li.kind.draw(rng)),
-                elevation_rad=rad(li.elevation_deg.draw(rng)),
-                azimuth_rad=rad(li.azimuth_deg.draw(rng)),
-                distance_m=li.distance_m.draw(rng),
-                intensity=0.0,  # set below, depends on kind
-                color_temp_k=li.color_temp_k.draw(rng),
-                size_m=li.size_m.draw(rng),
-                spot_angle_rad=rad(li.spot_angle_deg.draw(rng)),
-            )
+        kind = str(li.kind.draw(rng))
+        distance = li.distance_m.draw(rng)
+        light = LightSpec(
+            kind=kind,
+            elevation_rad=math.radians(li.elevation_deg.draw(rng)),
+            azimuth_rad=math.radians(li.azimuth_deg.draw(rng)),
+            distance_m=distance,
+            intensity=0.0,
+            color_temp_k=li.color_temp_k.draw(rng),
+            size_m=li.size_m.draw(rng),
+            spot_angle_rad=math.radians(li.spot_angle_deg.draw(rng)),
         )
-        L = lights[-1]
-        L.intensity = li.sun_irradiance_w_m2.draw(rng) if L.kind == "sun" else local_light_power(L.kind, li.irradiance_w_m2.draw(rng), L.distance_m)
-        if L.kind == "sun":
-            L.size_m = rad(li.sun_angle_deg.draw(rng))
-    ambient = AmbientSpec(strength=li.ambient_strength.draw(rng), color_temp_k=li.ambient_color_temp_k.draw(rng))
+        local_irradiance = li.irradiance_w_m2.draw(rng)  # both strengths and the sun angle are always
+        sun_irradiance = li.sun_irradiance_w_m2.draw(rng)  # drawn, so the kind never shifts later draws
+        sun_angle = math.radians(li.sun_angle_deg.draw(rng))
+        if kind == "sun":
+            light.intensity, light.size_m = sun_irradiance, sun_angle
+        else:
+            light.intensity = local_light_power(kind, local_irradiance, distance)
+        lights.append(light)
+    return lights
 
+
+def _shadow(recipe: Recipe, rng: np.random.Generator, n_lights: int) -> ShadowSpec:
     sh = recipe.shadow
-    shadow = ShadowSpec(
-        enabled=bool(rng.random() < sh.probability),
-        pattern=str(sh.pattern.draw(rng)),
-        seed=seed(),
-        light_index=int(rng.integers(0, len(lights))),
+    enabled = bool(rng.random() < sh.probability)
+    pattern = str(sh.pattern.draw(rng))
+    seed = _seed(rng)
+    # One uniform scaled to the light count (not integers(0, n), whose consumption may vary):
+    # light_index is the one shadow value that depends on another section, by design.
+    light_index = min(int(rng.random() * n_lights), n_lights - 1)
+    return ShadowSpec(
+        enabled=enabled,
+        pattern=pattern,
+        seed=seed,
+        light_index=light_index,
         height_m=sh.height_m.draw(rng),
         size_m=sh.size_m.draw(rng),
         coverage=sh.coverage.draw(rng),
@@ -314,78 +360,106 @@ def make_spec(recipe: "Recipe", index: int) -> SampleSpec:  # noqa: F821
         offset_y_m=sh.offset_m.draw(rng),
     )
 
+
+def _camera(recipe: Recipe, rng: np.random.Generator, baseline_m: float) -> CameraSpec:
     ca = recipe.camera
-    st = recipe.stereo
-    baseline = st.baseline_m.draw(rng) if st.enabled else 0.0
-    camera = CameraSpec(
+    return CameraSpec(
         width_px=ca.width_px,
         height_px=ca.height_px,
         distance_m=ca.distance_m.draw(rng),
-        tilt_rad=rad(ca.tilt_deg.draw(rng)),
-        azimuth_rad=rad(ca.azimuth_deg.draw(rng)),
-        roll_rad=rad(ca.roll_deg.draw(rng)),
+        tilt_rad=math.radians(ca.tilt_deg.draw(rng)),
+        azimuth_rad=math.radians(ca.azimuth_deg.draw(rng)),
+        roll_rad=math.radians(ca.roll_deg.draw(rng)),
         focal_mm=ca.focal_mm.draw(rng),
         sensor_width_mm=ca.sensor_width_mm,
         cx_offset_px=ca.principal_jitter_px.draw(rng),
         cy_offset_px=ca.principal_jitter_px.draw(rng),
         target_x_m=ca.target_jitter_m.draw(rng),
         target_y_m=ca.target_jitter_m.draw(rng),
-        baseline_m=baseline,
-    )
-    r = recipe.render
-    render = RenderSpec(
-        samples=r.samples, denoise=r.denoise, threads=r.threads, device=r.device, seed=seed(), max_bounces=r.max_bounces
+        baseline_m=baseline_m,  # drawn by the stereo section; copied here for the rig
     )
 
+
+def _stereo(recipe: Recipe, rng: np.random.Generator) -> StereoSpec:
+    st = recipe.stereo
+    baseline = st.baseline_m.draw(rng)  # drawn even when off: the stream stays the same
+    return StereoSpec(
+        enabled=st.enabled,
+        baseline_m=baseline if st.enabled else 0.0,
+        num_disparities=st.num_disparities,
+        block_size=st.block_size,
+    )
+
+
+def _tof(recipe: Recipe, rng: np.random.Generator) -> TofSpec:
     t = recipe.tof
-    tof = TofSpec(
+    return TofSpec(
         enabled=t.enabled,
         width_px=t.width_px,
         height_px=t.height_px,
-        hfov_rad=rad(t.hfov_deg),
-        vfov_rad=rad(t.vfov_deg),
+        hfov_rad=math.radians(t.hfov_deg),
+        vfov_rad=math.radians(t.vfov_deg),
         offset_m=[t.offset_x_m.draw(rng), t.offset_y_m.draw(rng), t.offset_z_m.draw(rng)],
-        rotation_rad=[rad(t.rotation_jitter_deg.draw(rng)) for _ in range(3)],
+        rotation_rad=[math.radians(t.rotation_jitter_deg.draw(rng)) for _ in range(3)],
         sigma0_m=t.sigma0_m,
         k_noise=t.k_noise,
         amplitude_scale=t.amplitude_scale,
         min_amplitude=t.min_amplitude,
-        grazing_rad=rad(t.grazing_deg),
+        grazing_rad=math.radians(t.grazing_deg),
         flying_pixels=t.flying_pixels,
         wrap_range_m=t.wrap_range_m,
         bias_m=t.bias_m.draw(rng),
-        seed=seed(),
+        seed=_seed(rng),
     )
-    l = recipe.lidar
-    lidar = LidarSpec(
-        enabled=l.enabled,
-        beams=l.beams,
-        vfov_min_rad=rad(l.vfov_min_deg),
-        vfov_max_rad=rad(l.vfov_max_deg),
-        hfov_rad=rad(l.hfov_deg),
-        azimuth_step_rad=rad(l.azimuth_step_deg),
-        max_range_m=l.max_range_m,
-        sigma_m=l.sigma_m,
-        dropout=l.dropout,
-        offset_m=[l.offset_x_m.draw(rng), l.offset_y_m.draw(rng), l.offset_z_m.draw(rng)],
-        rotation_rad=[rad(l.rotation_jitter_deg.draw(rng)) for _ in range(3)],
-        seed=seed(),
+
+
+def _lidar(recipe: Recipe, rng: np.random.Generator) -> LidarSpec:
+    li = recipe.lidar
+    return LidarSpec(
+        enabled=li.enabled,
+        beams=li.beams,
+        vfov_min_rad=math.radians(li.vfov_min_deg),
+        vfov_max_rad=math.radians(li.vfov_max_deg),
+        hfov_rad=math.radians(li.hfov_deg),
+        azimuth_step_rad=math.radians(li.azimuth_step_deg),
+        max_range_m=li.max_range_m,
+        sigma_m=li.sigma_m,
+        dropout=li.dropout,
+        offset_m=[li.offset_x_m.draw(rng), li.offset_y_m.draw(rng), li.offset_z_m.draw(rng)],
+        rotation_rad=[math.radians(li.rotation_jitter_deg.draw(rng)) for _ in range(3)],
+        seed=_seed(rng),
     )
-    stereo = StereoSpec(
-        enabled=st.enabled, baseline_m=baseline, num_disparities=st.num_disparities, block_size=st.block_size
-    )
+
+
+def make_spec(recipe: Recipe, index: int) -> SampleSpec:
+    """Draw every random parameter of sample ``index`` of ``recipe``, each section from its own stream."""
+    if not isinstance(recipe, Recipe):
+        raise TypeError(f"make_spec: recipe must be a Recipe, got {type(recipe).__name__}")
+
+    def rng(section: str) -> np.random.Generator:
+        return section_rng(recipe.dataset.seed, index, section)
+
+    s = recipe.surface
+    li = recipe.lights
+    a = rng("ambient")
+    lights = _lights(recipe, rng("lights"))
+    stereo = _stereo(recipe, rng("stereo"))
+    r = recipe.render
     return SampleSpec(
         index=int(index),
         recipe_seed=int(recipe.dataset.seed),
-        crack=crack,
-        surface=surface,
-        material=material,
+        crack=_crack(recipe, rng("crack")),
+        surface=SurfaceSpec(size_m=s.size_m.draw(rng("surface")), grid_px=s.grid_px, crackmap_px=s.crackmap_px),
+        material=_material(recipe, rng("material")),
         lights=lights,
-        ambient=ambient,
-        shadow=shadow,
-        camera=camera,
-        render=render,
-        tof=tof,
-        lidar=lidar,
+        ambient=AmbientSpec(strength=li.ambient_strength.draw(a), color_temp_k=li.ambient_color_temp_k.draw(a)),
+        shadow=_shadow(recipe, rng("shadow"), len(lights)),
+        camera=_camera(recipe, rng("camera"), stereo.baseline_m),
+        render=RenderSpec(
+            samples=r.samples, denoise=r.denoise, threads=r.threads, device=r.device,
+            seed=_seed(rng("render")), max_bounces=r.max_bounces,
+        ),
+        tof=_tof(recipe, rng("tof")),
+        lidar=_lidar(recipe, rng("lidar")),
         stereo=stereo,
     )

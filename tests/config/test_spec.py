@@ -1,10 +1,14 @@
-"""SampleSpec: depends only on (recipe, index); JSON roundtrip is lossless."""
+"""SampleSpec: depends only on (recipe, index); each section has its own stream; JSON roundtrip is lossless."""
+import dataclasses
 import json
 
+import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from crackgen.config.recipe import Recipe, parse_recipe
-from crackgen.config.spec import SampleSpec, make_spec
+from crackgen.config.spec import SECTION_STREAMS, SPEC_VERSION, SampleSpec, make_spec, section_rng
 
 
 def test_spec_depends_only_on_recipe_and_index():
@@ -47,3 +51,102 @@ def test_from_dict_rejects_unknown_keys():
     d["crack"]["bogus"] = 1
     with pytest.raises(ValueError, match="bogus"):
         SampleSpec.from_dict(json.loads(json.dumps(d)))
+
+
+# ---- one random stream per section ------------------------------------------------------------
+
+SECTIONS = [f.name for f in dataclasses.fields(SampleSpec) if f.name not in ("index", "recipe_seed", "version")]
+
+# (section that changes, recipe text A, recipe text B): B differs from A only in that section.
+TOGGLES = [
+    ("stereo", "[stereo]\nenabled = false", "[stereo]\nenabled = true"),
+    ("lights", "[lights]\ncount = {choices = [1, 2]}", "[lights]\ncount = {choices = [3, 4, 5]}"),
+    ("tof", "[tof]\nenabled = true", "[tof]\nenabled = false"),
+    ("lidar", "[lidar]\nenabled = true", "[lidar]\nenabled = false"),
+    ("shadow", "[shadow]\nprobability = 0.1", "[shadow]\nprobability = 0.9"),
+    (
+        "material",
+        "[material.distractors]\njoint = 0.0\nsealant = 0.0\nstain = 0.0\nmarking = 0.0",
+        "[material.distractors]\njoint = 1.0\nsealant = 0.5\nstain = 0.0\nmarking = 1.0",
+    ),
+]
+
+
+def drawn(spec: SampleSpec) -> dict[str, object]:
+    """Each section's values; camera.baseline_m left out: it is the stereo draw, copied for the rig."""
+    out = {name: getattr(spec, name) for name in SECTIONS}
+    out["camera"] = dataclasses.replace(spec.camera, baseline_m=None)
+    return out
+
+
+def test_every_spec_section_has_its_own_stream():
+    assert set(SECTIONS) <= set(SECTION_STREAMS)
+    numbers = list(SECTION_STREAMS.values())
+    assert sorted(numbers) == list(range(len(numbers)))  # unique, none skipped
+
+
+def test_section_stream_is_the_spawned_child_of_the_sample_root():
+    root = np.random.SeedSequence([123, 45])
+    children = root.spawn(len(SECTION_STREAMS))
+    for name, n in SECTION_STREAMS.items():
+        expected = np.random.default_rng(children[n]).random(4)
+        np.testing.assert_array_equal(section_rng(123, 45, name).random(4), expected)
+    with pytest.raises(ValueError, match="unknown section 'bogus'"):
+        section_rng(0, 0, "bogus")
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**63 - 1), index=st.integers(0, 10**6), toggle=st.sampled_from(TOGGLES))
+def test_changing_one_section_leaves_every_other_section_unchanged(seed, index, toggle):
+    section, text_a, text_b = toggle
+    a = make_spec(parse_recipe(f"[dataset]\nseed = {seed}\n{text_a}"), index)
+    b = make_spec(parse_recipe(f"[dataset]\nseed = {seed}\n{text_b}"), index)
+    da, db = drawn(a), drawn(b)
+    if section == "lights":
+        # the shadow's light_index scales one fixed draw to the light count: the only cross-section link
+        assert a.shadow.light_index < len(a.lights) and b.shadow.light_index < len(b.lights)
+        da["shadow"] = dataclasses.replace(a.shadow, light_index=0)
+        db["shadow"] = dataclasses.replace(b.shadow, light_index=0)
+        n = min(len(a.lights), len(b.lights))
+        assert a.lights[:n] == b.lights[:n]  # fixed draws per light: light i does not depend on the count
+    if section == "material":
+        assert dataclasses.replace(a.material, distractors=[]) == dataclasses.replace(b.material, distractors=[])
+        assert {d.kind for d in b.material.distractors} >= {"joint", "marking"} and not a.material.distractors
+    for name in SECTIONS:
+        if name != section:
+            assert da[name] == db[name], name
+
+
+@pytest.mark.parametrize("section, text_a, text_b", TOGGLES, ids=[t[0] for t in TOGGLES])
+def test_each_toggle_changes_its_own_section(section, text_a, text_b):
+    # Guards the test above against toggles that change nothing.
+    a = [make_spec(parse_recipe(text_a), i) for i in range(8)]
+    b = [make_spec(parse_recipe(text_b), i) for i in range(8)]
+    assert any(getattr(x, section) != getattr(y, section) for x, y in zip(a, b))
+
+
+def test_stereo_baseline_comes_from_the_stereo_section():
+    on = parse_recipe("[stereo]\nenabled = true\nbaseline_m = {min = 0.05, max = 0.2}")
+    off = parse_recipe("[stereo]\nenabled = false\nbaseline_m = {min = 0.05, max = 0.2}")
+    for i in range(5):
+        s = make_spec(on, i)
+        assert 0.05 <= s.stereo.baseline_m < 0.2 and s.camera.baseline_m == s.stereo.baseline_m
+        assert s.stereo.baseline_m == pytest.approx(0.05 + 0.15 * section_rng(0, i, "stereo").random())
+        t = make_spec(off, i)
+        assert t.stereo.baseline_m == 0.0 and t.camera.baseline_m == 0.0
+
+
+def test_every_section_differs_between_samples():
+    r = parse_recipe("[stereo]\nenabled = true")
+    a, b = make_spec(r, 0), make_spec(r, 1)
+    for name in SECTIONS:
+        if name == "surface" or name == "render":
+            continue  # compared through their single draw below
+        assert getattr(a, name) != getattr(b, name), name
+    assert a.surface.size_m != b.surface.size_m and a.render.seed != b.render.seed
+    assert a.version == SPEC_VERSION == 2
+
+
+def test_make_spec_refuses_a_non_recipe():
+    with pytest.raises(TypeError, match="make_spec: recipe must be a Recipe, got dict"):
+        make_spec({}, 0)
