@@ -62,8 +62,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         elif args.command == "predict":
             from trainer.predict import run_predict
 
-            reps = run_predict(args)
-            print(f"predicted {len(reps)} image(s) into {args.out}")
+            print(run_predict(args).summary())
         elif args.command == "sim2real":
             from trainer.sim2real import run_sim2real
 

@@ -5,11 +5,17 @@ Per image it writes ``STEM_prob.png`` (probability x 255), ``STEM_mask.png``
 the crack pixel count and the crack length from ``fusion.crack_length``
 (geodesic skeleton diameter). Length is in pixels unless ``--pixel-size-m``
 gives a metric scale (metres per pixel on a fronto-parallel surface).
+
+``OUT/report.json`` holds ``{"predicted": [per-image reports], "skipped":
+[{"image": path, "reason": one line}]}``; inputs are skipped (instead of
+stopping the run) only with ``--skip-bad``.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import logging
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +28,9 @@ from trainer.augment import sample_to_tensors
 from trainer.builders import add_data_args, real_folder
 from trainer.errors import TrainerInputError
 from trainer.evaluate import _inherit_depth, load_model
+
+log = logging.getLogger(__name__)
+REPORT_NAME = "report.json"
 
 
 def add_predict_args(p: argparse.ArgumentParser) -> None:
@@ -44,7 +53,20 @@ def overlay(rgb: np.ndarray, mask: np.ndarray, alpha: float = 0.6) -> np.ndarray
     return out.astype(np.uint8)
 
 
-def run_predict(args: argparse.Namespace) -> list[dict[str, Any]]:
+@dataclass
+class PredictResult:
+    """What ``run_predict`` did: per-image reports, skipped inputs with reasons, and the report file."""
+
+    report: Path
+    predicted: list[dict[str, Any]] = field(default_factory=list)
+    skipped: list[dict[str, str]] = field(default_factory=list)
+
+    def summary(self) -> str:
+        """One line for the CLI, counting predicted and skipped inputs separately."""
+        return f"{len(self.predicted)} predicted, {len(self.skipped)} skipped (see {self.report})"
+
+
+def run_predict(args: argparse.Namespace) -> PredictResult:
     from fusion.crack_length import crack_length  # pure numpy/scipy
 
     device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
@@ -58,14 +80,15 @@ def run_predict(args: argparse.Namespace) -> list[dict[str, Any]]:
     folder = real_folder(args, root, require_masks=False)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    reports = []
+    result = PredictResult(report=out / REPORT_NAME)
     for key in tqdm(folder.keys, desc="predict", disable=args.no_progress):
         try:
             sample = folder.load(key)
         except TrainerInputError as exc:
             if not args.skip_bad:
                 raise
-            reports.append({"image": key, "error": str(exc)})
+            log.warning("skipped: %s", exc)
+            result.skipped.append({"image": str(folder.image_path(key)), "reason": str(exc)})
             continue
         t = sample_to_tensors(sample, cfg)
         with torch.no_grad():
@@ -84,6 +107,8 @@ def run_predict(args: argparse.Namespace) -> list[dict[str, Any]]:
                "crack_fraction": float((mask > 0).mean()), "crack_length": float(length), "length_unit": unit,
                "max_probability": float(prob.max())}
         (out / f"{key}.json").write_text(json.dumps(rep, indent=2))
-        reports.append(rep)
-    (out / "report.json").write_text(json.dumps(reports, indent=2))
-    return reports
+        result.predicted.append(rep)
+    result.report.write_text(json.dumps({"predicted": result.predicted, "skipped": result.skipped}, indent=2))
+    if not result.predicted:
+        raise TrainerInputError(f"{root}: none of {len(result.skipped)} image(s) could be read (see {result.report})")
+    return result

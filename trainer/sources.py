@@ -112,6 +112,10 @@ class RealFolder:
     def __len__(self) -> int:
         return len(self._images)
 
+    def image_path(self, stem: str) -> Path:
+        """The image file of ``stem`` (for reports that must name the file, not just its stem)."""
+        return self._images[stem]
+
     def _find(self, folder: str, stem: str, exts: Sequence[str]) -> Path:
         for ext in exts:
             for e in (ext, ext.upper()):

@@ -1,0 +1,64 @@
+"""`cracktrain predict --skip-bad`: skipped inputs are counted apart from predictions and listed with reasons."""
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from trainer.augment import SampleConfig
+from trainer.checkpoint import save_checkpoint
+from trainer.cli import main
+from trainer.models import build_model
+
+
+def _untrained_checkpoint(path: Path) -> Path:
+    """A valid cracktrain checkpoint of an untrained RGB U-Net (predict only needs it to load and run)."""
+    model = build_model("unet", 3)
+    save_checkpoint(path, {"model": model.state_dict(), "args": {"arch": "unet", "depth": "none"},
+                           "sample_config": SampleConfig(channels="rgb").__dict__})
+    return path
+
+
+def _folder_one_good_one_corrupt(root: Path) -> tuple[Path, Path]:
+    (root / "images").mkdir(parents=True)
+    good = root / "images" / "good.png"
+    cv2.imwrite(str(good), np.full((32, 48, 3), 120, np.uint8))
+    bad = root / "images" / "broken.jpg"
+    bad.write_bytes(b"this is not a JPEG at all \x00\x01\x02" * 8)
+    return good, bad
+
+
+def test_predict_skip_bad_reports_predicted_and_skipped_separately(tmp_path, capsys):
+    ckpt = _untrained_checkpoint(tmp_path / "untrained.pt")
+    good, bad = _folder_one_good_one_corrupt(tmp_path / "photos")
+    out = tmp_path / "pred"
+    rc = main(["predict", str(tmp_path / "photos"), "-c", str(ckpt), "--out", str(out), "--skip-bad", "--no-progress"])
+    assert rc == 0
+    printed = capsys.readouterr().out.strip().splitlines()[-1]
+    report = out / "report.json"
+    assert printed.startswith("1 predicted, 1 skipped") and str(report) in printed
+    rep = json.loads(report.read_text())
+    assert [r["image"] for r in rep["predicted"]] == [str(good)]
+    assert len(rep["skipped"]) == 1
+    skipped = rep["skipped"][0]
+    assert skipped["image"] == str(bad) and str(bad) in skipped["reason"] and "\n" not in skipped["reason"]
+    assert (out / "good_mask.png").is_file() and not list(out.glob("broken*"))
+
+
+def test_predict_without_skip_bad_stops_on_the_corrupt_file(tmp_path, capsys):
+    ckpt = _untrained_checkpoint(tmp_path / "untrained.pt")
+    _, bad = _folder_one_good_one_corrupt(tmp_path / "photos")
+    rc = main(["predict", str(tmp_path / "photos"), "-c", str(ckpt), "--out", str(tmp_path / "pred"), "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and str(bad) in err[0]
+
+
+def test_predict_skip_bad_with_nothing_readable_fails_with_report(tmp_path, capsys):
+    ckpt = _untrained_checkpoint(tmp_path / "untrained.pt")
+    (tmp_path / "photos").mkdir()
+    (tmp_path / "photos" / "broken.jpg").write_bytes(b"garbage")
+    out = tmp_path / "pred"
+    rc = main(["predict", str(tmp_path / "photos"), "-c", str(ckpt), "--out", str(out), "--skip-bad", "--no-progress"])
+    assert rc == 2 and "report.json" in capsys.readouterr().err
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["predicted"] == [] and len(rep["skipped"]) == 1
