@@ -515,34 +515,3 @@ def save_preview(maps: MaterialMaps, path: str | Path, max_px: int = 512) -> Pat
     if not cv2.imwrite(str(out), cv2.cvtColor(np.ascontiguousarray(sheet), cv2.COLOR_RGB2BGR)):
         raise MaterialError(f"{out}: could not write preview PNG")
     return out
-
-
-# ----------------------------------------------------------------------------- benchmark
-
-
-def bench_materials(
-    families: list[str] | None = None, px: int = 1024, size_m: float = 2.5, repeats: int = 3, seed: int = 0
-) -> dict[str, float]:
-    """Best-of-``repeats`` seconds per ``material_maps`` call per family, after a warm-up call
-    (numba compilation excluded). Used by ``crackgen bench`` and the issue notes; never asserted."""
-    import time
-
-    from crackgen.procedural.crackmap import crack_map
-    from crackgen.config.spec import CrackSpec, DistractorSpec
-
-    crack = CrackSpec(freq_x=3.0, freq_y=3.0, octaves=5, persistence=0.5, lacunarity=2.0, threshold=0.03,
-                      depth_m=0.01, noise_seed=seed, offset_u=0.0, offset_v=0.0)
-    cm = crack_map(crack, px, size_m, measure=False)
-    out = {}
-    for fam in families or list_families():
-        spec = MaterialSpec(family=fam, seed=seed, texture_px=px, hue_shift=0.0, value_scale=1.0,
-                            roughness_offset=0.0, crack_darkening=0.3, crack_roughness=0.95,
-                            distractors=[DistractorSpec("stain", seed + 1)])
-        material_maps(spec, cm)
-        times = []
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            material_maps(spec, cm)
-            times.append(time.perf_counter() - t0)
-        out[fam] = min(times)
-    return out

@@ -1,8 +1,19 @@
-"""Dataset shards: codecs, manifest, writer and reader (WebDataset convention).
+"""Dataset shards (WebDataset convention): one concern per module, re-exported here.
+
+- ``members``: the registry of member names, codecs and pixel grids;
+- ``codecs``: member value <-> bytes (PNG, OpenEXR, JSON);
+- ``storage``: local paths and fsspec URLs (size, hash, read, atomic replace);
+- ``manifest``: ``manifest.json``, shard names, recorded versions;
+- ``writer``: ``ShardWriter``, all-or-nothing tars;
+- ``reader``: ``iter_samples`` and friends (what the trainer imports);
+- ``verify``: ``verify_dataset``, every problem of a dataset, one line each.
 
 ``from crackgen.shards import iter_samples`` is the public reader contract.
 """
-from crackgen.shards.members import (  # noqa: F401
+from crackgen.shards.codecs import CodecError, decode_member, encode_member, wds_decoder
+from crackgen.shards.errors import ShardError
+from crackgen.shards.manifest import Manifest, ManifestError, ShardInfo, ShardRecord, shard_index, shard_name
+from crackgen.shards.members import (
     MEMBERS,
     RGB_MEMBERS,
     RGB_VIEW_MEMBERS,
@@ -11,9 +22,31 @@ from crackgen.shards.members import (  # noqa: F401
     member_for_file,
     member_for_name,
 )
-from crackgen.shards.tarshards import *  # noqa: F401,F403
-from crackgen.shards.tarshards import __all__ as _tar_all
-from crackgen.shards.tarshards import synthetic_sample  # noqa: F401
+from crackgen.shards.reader import (
+    ShardDataset,
+    ShardRef,
+    iter_samples,
+    list_shards,
+    load_sample,
+    open_dataset,
+    split_shards,
+)
+from crackgen.shards.storage import StorageError
+from crackgen.shards.verify import verify_dataset
+from crackgen.shards.writer import ShardWriter, clean_partials, sample_key
 
-__all__ = [*_tar_all, "MEMBERS", "RGB_MEMBERS", "RGB_VIEW_MEMBERS", "Codec", "Member",
-           "member_for_file", "member_for_name"]
+__all__ = [
+    # reader (the trainer's contract)
+    "iter_samples", "load_sample", "list_shards", "split_shards", "open_dataset", "ShardDataset", "ShardRef",
+    # writer
+    "ShardWriter", "sample_key", "clean_partials",
+    # verify
+    "verify_dataset",
+    # manifest
+    "Manifest", "ShardInfo", "ShardRecord", "shard_name", "shard_index",
+    # members and codecs
+    "MEMBERS", "RGB_MEMBERS", "RGB_VIEW_MEMBERS", "Codec", "Member", "member_for_file", "member_for_name",
+    "encode_member", "decode_member", "wds_decoder",
+    # errors
+    "ShardError", "ManifestError", "CodecError", "StorageError",
+]
