@@ -1,7 +1,9 @@
 """Encode and decode the members of a shard sample (PNG, OpenEXR, JSON).
 
 One place decides how an array becomes bytes, so the writer, our reader and
-the ``webdataset`` decoder (``wds_decoder``) agree exactly:
+the ``webdataset`` decoder (``wds_decoder``) agree exactly. The codec is chosen by
+the member's extension; which member uses which extension, and what its value must
+be, is the registry's business (``crackgen.shards.members``):
 
 - ``.png``: cv2, lossless. uint8/uint16, H×W (grey) or H×W×3 RGB / H×W×4 RGBA
   (cv2's BGR order is handled here and nowhere else).
