@@ -328,6 +328,27 @@ class StereoSection(Section):
         return self
 
 
+ADAPT_METHODS = ("fourier", "reinhard", "histogram")  # = crackgen.postrender.adapt.METHODS
+
+
+class AdaptSection(Section):
+    """Post-render appearance adaptation toward a folder of unlabeled target photos (RGB views only)."""
+
+    target: str = Field("", max_length=4096,
+                        description='folder of unlabeled target photos ("" = off; relative to the working directory)')
+    probability: float = Field(1.0, ge=0.0, le=1.0, description="chance that a sample is adapted (0..1)")
+    method: _c(*ADAPT_METHODS) = _d(
+        {"choices": list(ADAPT_METHODS), "weights": [0.5, 0.25, 0.25]},
+        "fourier (FDA low-frequency amplitude swap) | reinhard (Lab mean/std) | histogram (per-channel CDF)",
+    )
+    band: _t(0.0, 0.5) = _d({"min": 0.005, "max": 0.05},
+                            "fourier: half-width of the swapped low-frequency square (fraction of min(H, W))")
+
+    @property
+    def enabled(self) -> bool:
+        return bool(self.target.strip()) and self.probability > 0
+
+
 class Recipe(Section):
     dataset: DatasetSection = Field(default_factory=DatasetSection)
     crack: CrackSection = Field(default_factory=CrackSection)
@@ -340,6 +361,7 @@ class Recipe(Section):
     tof: TofSection = Field(default_factory=TofSection)
     lidar: LidarSection = Field(default_factory=LidarSection)
     stereo: StereoSection = Field(default_factory=StereoSection)
+    adapt: AdaptSection = Field(default_factory=AdaptSection)
 
     # set by load_recipe; not part of the schema
     _text: str = ""

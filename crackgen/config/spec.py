@@ -41,6 +41,7 @@ SECTION_STREAMS: dict[str, int] = {
     "render": 8,
     "tof": 9,
     "lidar": 10,
+    "adapt": 11,
 }
 
 
@@ -194,6 +195,20 @@ class StereoSpec:
 
 
 @dataclass
+class AdaptSpec:
+    """Post-render appearance adaptation of the RGB views (``[adapt]``).
+
+    The target photo is drawn as a fraction in [0, 1) of the sorted target folder, so
+    the spec stays a pure draw; the stage resolves it to a file name (in the metadata)."""
+
+    enabled: bool = False
+    method: str = ""  # fourier | reinhard | histogram
+    band: float = 0.0  # fourier only: fraction of min(H, W)
+    target: str = ""  # the recipe's target folder
+    target_fraction: float = 0.0
+
+
+@dataclass
 class SampleSpec:
     index: int
     recipe_seed: int
@@ -208,6 +223,7 @@ class SampleSpec:
     tof: TofSpec
     lidar: LidarSpec
     stereo: StereoSpec
+    adapt: AdaptSpec = field(default_factory=AdaptSpec)
     version: int = SPEC_VERSION
 
     def to_dict(self) -> dict[str, Any]:
@@ -431,6 +447,17 @@ def _lidar(recipe: Recipe, rng: np.random.Generator) -> LidarSpec:
     )
 
 
+def _adapt(recipe: Recipe, rng: np.random.Generator) -> AdaptSpec:
+    """Every draw is made even when adaptation is off or skipped, so toggling it moves nothing."""
+    a = recipe.adapt
+    applied = bool(rng.random() < a.probability)
+    method, band, fraction = str(a.method.draw(rng)), float(a.band.draw(rng)), float(rng.random())
+    if not (a.enabled and applied):
+        return AdaptSpec()
+    return AdaptSpec(enabled=True, method=method, band=band if method == "fourier" else 0.0,
+                     target=a.target, target_fraction=fraction)
+
+
 def make_spec(recipe: Recipe, index: int) -> SampleSpec:
     """Draw every random parameter of sample ``index`` of ``recipe``, each section from its own stream."""
     if not isinstance(recipe, Recipe):
@@ -462,4 +489,5 @@ def make_spec(recipe: Recipe, index: int) -> SampleSpec:
         tof=_tof(recipe, rng("tof")),
         lidar=_lidar(recipe, rng("lidar")),
         stereo=stereo,
+        adapt=_adapt(recipe, rng("adapt")),
     )

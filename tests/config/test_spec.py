@@ -69,6 +69,7 @@ TOGGLES = [
         "[material.distractors]\njoint = 0.0\nsealant = 0.0\nstain = 0.0\nmarking = 0.0",
         "[material.distractors]\njoint = 1.0\nsealant = 0.5\nstain = 0.0\nmarking = 1.0",
     ),
+    ("adapt", '[adapt]\ntarget = ""', '[adapt]\ntarget = "photos"\nprobability = 0.7'),
 ]
 
 
@@ -137,7 +138,7 @@ def test_stereo_baseline_comes_from_the_stereo_section():
 
 
 def test_every_section_differs_between_samples():
-    r = parse_recipe("[stereo]\nenabled = true")
+    r = parse_recipe('[stereo]\nenabled = true\n[adapt]\ntarget = "photos"')
     a, b = make_spec(r, 0), make_spec(r, 1)
     for name in SECTIONS:
         if name == "surface" or name == "render":
@@ -150,3 +151,16 @@ def test_every_section_differs_between_samples():
 def test_make_spec_refuses_a_non_recipe():
     with pytest.raises(TypeError, match="make_spec: recipe must be a Recipe, got dict"):
         make_spec({}, 0)
+
+
+def test_adapt_draws_follow_the_recipe():
+    r = parse_recipe('[adapt]\ntarget = "photos"\nprobability = 0.5\nmethod = {choices = ["fourier", "histogram"]}'
+                     '\nband = {min = 0.01, max = 0.02}')
+    specs = [make_spec(r, i).adapt for i in range(200)]
+    on = [a for a in specs if a.enabled]
+    assert 70 < len(on) < 130  # probability 0.5
+    assert {a.method for a in on} == {"fourier", "histogram"}
+    assert all(0.01 <= a.band < 0.02 for a in on if a.method == "fourier")
+    assert all(a.band == 0.0 for a in on if a.method == "histogram")
+    assert all(0.0 <= a.target_fraction < 1.0 and a.target == "photos" for a in on)
+    assert not any(a.enabled for a in (make_spec(parse_recipe(""), i).adapt for i in range(5)))
