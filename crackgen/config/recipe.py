@@ -339,7 +339,7 @@ class AdaptSection(Section):
     probability: float = Field(1.0, ge=0.0, le=1.0, description="chance that a sample is adapted (0..1)")
     method: _c(*ADAPT_METHODS) = _d(
         {"choices": list(ADAPT_METHODS), "weights": [0.5, 0.25, 0.25]},
-        "fourier (FDA low-frequency amplitude swap) | reinhard (Lab mean/std) | histogram (per-channel CDF)",
+        "fourier (FDA low-frequency amplitude swap), reinhard (Lab mean/std) or histogram (per-channel CDF)",
     )
     band: _t(0.0, 0.5) = _d({"min": 0.005, "max": 0.05},
                             "fourier: half-width of the swapped low-frequency square (fraction of min(H, W))")
