@@ -37,15 +37,16 @@ def _read_exr(path: Path) -> np.ndarray:
     import OpenEXR  # local: only needed for EXR depth maps
 
     try:
+        # Copy the pixels out inside the block: closing the file empties its channel dict.
         with OpenEXR.File(str(path), separate_channels=True) as f:
-            chans = f.channels()
+            chans = {name: np.array(c.pixels, dtype=np.float32) for name, c in f.channels().items()}
     except Exception as exc:  # OpenEXR raises plain RuntimeError/ValueError
         raise TrainerInputError(f"cannot read EXR {path}: {exc}") from None
     for name in ("Z", "Y", "R", "depth", "V"):
         if name in chans:
-            return np.asarray(chans[name].pixels, dtype=np.float32)
+            return chans[name]
     if len(chans) == 1:
-        return np.asarray(next(iter(chans.values())).pixels, dtype=np.float32)
+        return next(iter(chans.values()))
     raise TrainerInputError(f"EXR {path} has no depth channel (channels: {sorted(chans)})")
 
 

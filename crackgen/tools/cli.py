@@ -1,4 +1,4 @@
-"""`crackgen` command line: generate, validate, inspect, bench, show, verify.
+"""`crackgen` command line: generate, validate, inspect, bench, show, verify, export.
 
 Each subcommand imports its heavy modules lazily so `crackgen --help` and
 `crackgen validate` stay fast. Bad input exits 1 with one line per problem; a run
@@ -122,6 +122,18 @@ def _cmd_verify(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_export(args: argparse.Namespace) -> int:
+    from crackgen.tools.export import ExportError, export
+
+    try:
+        result = export(args.dir, args.to, args.members.split(","), depth_format=args.depth_format,
+                        progress=not args.no_progress)
+    except ExportError as exc:
+        return _err(str(exc))
+    print(result.summary())
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="crackgen", description="Synthetic RGB-D crack datasets from headless Blender.")
     p.add_argument("--version", action="version", version=f"crackgen {__version__}")
@@ -170,6 +182,15 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("dir")
     c.add_argument("--quick", action="store_true", help="size and sha256 only, do not decode members")
     c.set_defaults(func=_cmd_verify)
+
+    e = sub.add_parser("export", help="images/ + masks/ (+ depth/, tof/, lidar/) folders for other tools")
+    e.add_argument("dir")
+    e.add_argument("--to", required=True, help="output folder (must be new or empty)")
+    e.add_argument("--members", default="rgb,mask", help="comma list of rgb, mask, depth, tof, lidar")
+    e.add_argument("--depth-format", choices=("png16", "exr"), default="png16",
+                   help="png16: 16-bit PNG in mm, 0 = none; exr: float32 metres, -1 = none")
+    e.add_argument("--no-progress", action="store_true", help="no progress bar")
+    e.set_defaults(func=_cmd_export)
     return p
 
 

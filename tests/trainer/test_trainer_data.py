@@ -9,6 +9,7 @@ import torch
 from trainer.augment import RGB_MEAN, RGB_STD, SampleConfig, sample_generator, sample_to_tensors
 from trainer.depth import align_to_rgb, disparity_to_depth, normalise_depth
 from trainer.errors import TrainerInputError
+from trainer.imageio import read_float_map
 from trainer.sources import RealFolder, split_fraction
 from trainer.stream import SegStream, mix_repeat
 
@@ -72,6 +73,15 @@ def test_rgbd_folder_disparity_pipeline(tmp_path):
     assert torch.allclose(t["image"][3][valid == 1], torch.tensor(2.5 / 5.0))
     assert int(valid.sum()) == 40 * 50  # 25 valid source columns -> 50 px, 40 rows
 
+
+
+def test_exr_depth_map_is_read_with_its_values(tmp_path):
+    import OpenEXR
+
+    depth = np.linspace(0.3, 2.0, 6 * 8, dtype=np.float32).reshape(6, 8)
+    depth[0, :3] = -1
+    OpenEXR.File({"type": OpenEXR.scanlineimage}, {"Z": depth}).write(str(tmp_path / "d.exr"))
+    assert np.array_equal(read_float_map(tmp_path / "d.exr"), depth)
 
 def _marker_sample(h=64, w=64):
     rgb = np.full((h, w, 3), 40, np.uint8)

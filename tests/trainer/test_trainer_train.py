@@ -6,11 +6,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from synthetic_shards import write_shards
 
 from trainer.cli import main
-
-shards = pytest.importorskip("crackgen.shards")
-bench_shards = pytest.importorskip("crackgen.tools.bench_shards")
 
 
 def _real_folder(root: Path, n: int = 8) -> Path:
@@ -28,20 +26,10 @@ def _real_folder(root: Path, n: int = 8) -> Path:
     return root
 
 
-def _shards(root: Path, n_shards: int = 2, per_shard: int = 4) -> Path:
-    rng = np.random.default_rng(1)
-    for s in range(n_shards):
-        with shards.ShardWriter(root, s) as w:
-            for i in range(per_shard):
-                smp = bench_shards.synthetic_sample(rng, 48, 16)
-                w.add(shards.sample_key(s, i), {k: smp[k] for k in ("rgb.png", "mask.png", "depth.exr", "tof.exr", "json")})
-    return root
-
-
 @pytest.fixture(scope="module")
 def data(tmp_path_factory):
     base = tmp_path_factory.mktemp("trainer")
-    return {"real": _real_folder(base / "real"), "shards": _shards(base / "shards"), "base": base}
+    return {"real": _real_folder(base / "real"), "shards": write_shards(base / "shards"), "base": base}
 
 
 def _losses(run: Path) -> dict[int, float]:
