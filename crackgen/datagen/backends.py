@@ -1,4 +1,4 @@
-"""Where shards run: a local process pool (spawn) or Ray tasks.
+"""Where shards run: a local process pool (spawn) or Ray tasks, behind one ``Backend`` interface.
 
 Both keep one ``SampleProducer`` (one live Blender scene) per worker process, cached
 in a module global, so the scene is built once and reused for every shard the process
@@ -6,15 +6,25 @@ gets. Workers report each finished sample through a queue so the driver's progre
 bar moves per sample, not per shard. A worker killed with -9 breaks the local pool;
 the driver sees ``BrokenProcessPool``, stops, and returns a one-line reason: the
 manifest then lists only finished shards and ``--resume`` redoes the rest.
+
+``generate`` picks a back end from ``BACKENDS`` by name; adding one is one class and
+one registry line.
 """
 from __future__ import annotations
 
+import multiprocessing as mp
 import queue as _queue
 import threading
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from importlib.metadata import PackageNotFoundError, version
+from typing import Any, Callable, Protocol
 
-from crackgen.datagen.generate import ShardResult, ShardTask, run_shard
+from crackgen.datagen.tasks import ShardResult, ShardTask, run_shard
+
+ResultFn = Callable[[ShardResult], None]
+SampleFn = Callable[[int], None]
 
 _PRODUCER: Any = None
 _PRODUCER_KEY: tuple | None = None
@@ -31,10 +41,20 @@ class Job:
     storage_options: dict[str, Any] = field(default_factory=dict)
 
 
+class Backend(Protocol):
+    """Runs shard tasks somewhere and reports back; the driver owns the manifest."""
+
+    def run(self, job: Job, tasks: list[ShardTask], workers: int, on_result: ResultFn,
+            on_sample: SampleFn) -> str | None:
+        """Run ``tasks``; ``on_result`` per finished shard, ``on_sample(n)`` per finished sample.
+
+        Returns None, or one line saying why the run stopped early.
+        """
+        ...
+
+
 def worker_versions() -> dict[str, str]:
     """Generator-side versions for the manifest (bpy's from package metadata: no import)."""
-    from importlib.metadata import PackageNotFoundError, version
-
     out = {}
     for pkg in ("bpy", "open3d-cpu", "opensimplex"):
         try:
@@ -49,8 +69,9 @@ def producer_for(job: Job):
     global _PRODUCER, _PRODUCER_KEY
     key = (job.recipe_text, job.threads)
     if _PRODUCER is None or _PRODUCER_KEY != key:
-        from crackgen.datagen.pipeline import SampleProducer
+        # Heavy (numba, scipy, the whole generator): only worker processes pay for it, not the driver.
         from crackgen.config.recipe import parse_recipe
+        from crackgen.datagen.pipeline import SampleProducer
 
         _PRODUCER = SampleProducer(parse_recipe(job.recipe_text, "recipe"), threads=job.threads)
         _PRODUCER_KEY = key
@@ -76,7 +97,7 @@ def _local_shard(job: Job, task: ShardTask) -> ShardResult:
     return run_shard(producer_for(job), job.out, task, job.storage_options, on_sample=_report)
 
 
-def _drain(q: Any, update: Callable[[int], None], stop: threading.Event) -> None:
+def _drain(q: Any, update: SampleFn, stop: threading.Event) -> None:
     while not stop.is_set():
         try:
             update(q.get(timeout=0.2))
@@ -91,44 +112,45 @@ def _drain(q: Any, update: Callable[[int], None], stop: threading.Event) -> None
             return
 
 
-def run_local(job: Job, tasks: list[ShardTask], workers: int, on_result: Callable[[ShardResult], None],
-              on_sample: Callable[[int], None]) -> str | None:
-    """Run ``tasks`` on a spawn process pool; returns None, or why the run stopped early."""
-    import multiprocessing as mp
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    from concurrent.futures.process import BrokenProcessPool
+@dataclass(frozen=True)
+class LocalBackend:
+    """Shards on a spawn process pool of ``workers`` processes on this machine."""
 
-    ctx = mp.get_context("spawn")  # fork would copy a half-initialised bpy/OpenMP state
-    q = ctx.Queue()
-    stop = threading.Event()
-    drainer = threading.Thread(target=_drain, args=(q, on_sample, stop), daemon=True)
-    drainer.start()
-    workers = max(1, min(workers, len(tasks)))
-    aborted = None
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_local, initargs=(q,))
-    try:
-        pending = {pool.submit(_local_shard, job, t): t for t in tasks}
-        while pending:
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for fut in done:
-                task = pending.pop(fut)
-                try:
-                    on_result(fut.result())
-                except BrokenProcessPool:
-                    aborted = (f"a worker process died (killed or out of memory) while shard {task.index} "
-                               f"was running; {len(pending) + 1} shards unfinished")
-                    pending.clear()
-                    break
-    finally:
-        pool.shutdown(wait=aborted is None, cancel_futures=True)
-        stop.set()
-        drainer.join(timeout=5)
-        q.close()
-        if aborted is None:
-            q.join_thread()
-        else:
-            q.cancel_join_thread()  # a killed worker may have left the pipe mid-message
-    return aborted
+    address: str | None = None  # unused (no cluster); accepted so every back end is built alike
+
+    def run(self, job: Job, tasks: list[ShardTask], workers: int, on_result: ResultFn,
+            on_sample: SampleFn) -> str | None:
+        ctx = mp.get_context("spawn")  # fork would copy a half-initialised bpy/OpenMP state
+        q = ctx.Queue()
+        stop = threading.Event()
+        drainer = threading.Thread(target=_drain, args=(q, on_sample, stop), daemon=True)
+        drainer.start()
+        workers = max(1, min(workers, len(tasks)))
+        aborted = None
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_local, initargs=(q,))
+        try:
+            pending = {pool.submit(_local_shard, job, t): t for t in tasks}
+            while pending:
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    task = pending.pop(fut)
+                    try:
+                        on_result(fut.result())
+                    except BrokenProcessPool:
+                        aborted = (f"a worker process died (killed or out of memory) while shard {task.index} "
+                                   f"was running; {len(pending) + 1} shards unfinished")
+                        pending.clear()
+                        break
+        finally:
+            pool.shutdown(wait=aborted is None, cancel_futures=True)
+            stop.set()
+            drainer.join(timeout=5)
+            q.close()
+            if aborted is None:
+                q.join_thread()
+            else:
+                q.cancel_join_thread()  # a killed worker may have left the pipe mid-message
+        return aborted
 
 
 # ---------------------------------------------------------------- Ray
@@ -139,45 +161,53 @@ def _ray_shard(job: Job, task: ShardTask, progress: Any) -> ShardResult:
     return run_shard(producer_for(job), job.out, task, job.storage_options, on_sample=_report)
 
 
-def run_ray(job: Job, tasks: list[ShardTask], workers: int, on_result: Callable[[ShardResult], None],
-            on_sample: Callable[[int], None], address: str | None = None) -> str | None:
+@dataclass(frozen=True)
+class RayBackend:
     """Shards as Ray tasks on a local Ray instance (``workers`` CPUs) or the cluster at ``address``.
 
     Ray reuses worker processes between tasks of one function, so ``producer_for`` keeps the
     Blender scene alive across shards. The output must be reachable by every node: a shared
     path or an fsspec URL (s3://...).
     """
-    import ray
-    from ray.util.queue import Queue
 
-    started = False
-    if not ray.is_initialized():
-        if address:
-            ray.init(address=address, include_dashboard=False, log_to_driver=False)
-        else:
-            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
-        started = True
-    try:
-        progress = Queue()
-        remote = ray.remote(num_cpus=1, max_retries=1)(_ray_shard)
-        refs = {remote.remote(job, t, progress): t for t in tasks}
-        aborted = None
-        while refs:
-            ready, _ = ray.wait(list(refs), num_returns=1, timeout=0.2)
-            while True:
-                try:
-                    on_sample(progress.get_nowait())
-                except Exception:  # noqa: BLE001 - ray.util.queue.Empty
-                    break
-            for r in ready:
-                task = refs.pop(r)
-                try:
-                    on_result(ray.get(r))
-                except ray.exceptions.RayError as exc:
-                    aborted = f"Ray task for shard {task.index} failed: {str(exc).splitlines()[0]}"
-                    on_result(ShardResult(task.index, None, [], {}, error=aborted))
-        return aborted
-    finally:
-        if started:
-            ray.shutdown()
+    address: str | None = None
 
+    def run(self, job: Job, tasks: list[ShardTask], workers: int, on_result: ResultFn,
+            on_sample: SampleFn) -> str | None:
+        import ray  # optional dependency: only this back end needs it
+        from ray.util.queue import Queue
+
+        started = False
+        if not ray.is_initialized():
+            if self.address:
+                ray.init(address=self.address, include_dashboard=False, log_to_driver=False)
+            else:
+                ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+            started = True
+        try:
+            progress = Queue()
+            remote = ray.remote(num_cpus=1, max_retries=1)(_ray_shard)
+            refs = {remote.remote(job, t, progress): t for t in tasks}
+            aborted = None
+            while refs:
+                ready, _ = ray.wait(list(refs), num_returns=1, timeout=0.2)
+                while True:
+                    try:
+                        on_sample(progress.get_nowait())
+                    except Exception:  # noqa: BLE001 - ray.util.queue.Empty
+                        break
+                for r in ready:
+                    task = refs.pop(r)
+                    try:
+                        on_result(ray.get(r))
+                    except ray.exceptions.RayError as exc:
+                        aborted = f"Ray task for shard {task.index} failed: {str(exc).splitlines()[0]}"
+                        on_result(ShardResult(task.index, None, [], {}, error=aborted))
+            return aborted
+        finally:
+            if started:
+                ray.shutdown()
+
+
+# name -> constructor taking the cluster address (None = local); `--backend` choices are its keys
+BACKENDS: dict[str, Callable[[str | None], Backend]] = {"local": LocalBackend, "ray": RayBackend}

@@ -17,12 +17,13 @@ import time
 from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Mapping
 
-from crackgen.errors import CrackgenError
-from crackgen.shards.manifest import Manifest, ManifestError, get_fs, is_url, local_path, shard_index
 from crackgen.config.recipe import Recipe
-
-RETRIES = 1  # a failing sample is tried 1 + RETRIES times before it is recorded as failed
-ProgressFn = Callable[[int], None]
+from crackgen.datagen.backends import BACKENDS, Job, worker_versions
+from crackgen.datagen.tasks import ShardResult, ShardTask
+from crackgen.errors import CrackgenError
+from crackgen.shards import clean_partials
+from crackgen.shards.manifest import Manifest, ManifestError, ShardInfo, shard_index
+from crackgen.shards.storage import get_fs, is_url, local_path
 
 
 class GenerateError(CrackgenError, RuntimeError):
@@ -30,14 +31,6 @@ class GenerateError(CrackgenError, RuntimeError):
 
 
 # ---------------------------------------------------------------- planning
-
-@dataclass(frozen=True)
-class ShardTask:
-    """One shard to make: its index and the global sample indices it holds."""
-
-    index: int
-    samples: tuple[int, ...]
-
 
 def effective_recipe(recipe: Recipe, samples: int | None) -> Recipe:
     """The recipe with ``--samples`` applied (so its hash and shard plan reflect it)."""
@@ -56,79 +49,12 @@ def plan_shards(recipe: Recipe) -> list[ShardTask]:
     return [ShardTask(i, tuple(range(i * size, min((i + 1) * size, n)))) for i in range(recipe.num_shards)]
 
 
-def sample_key_for(shard: int, sample: int) -> str:
-    """Key ``SSSSSS-IIIII``: shard index and the *global* sample index (= the spec index),
-    so a key names its spec directly and stays unique across the dataset."""
-    from crackgen.shards import sample_key
-
-    return sample_key(shard, sample)
-
-
 def cycles_threads(recipe: Recipe, workers: int, cores: int | None = None) -> int:
     """Cycles threads per worker: the recipe's value, else the cores split between workers."""
     if recipe.render.threads > 0:
         return recipe.render.threads
     cores = cores or os.cpu_count() or 1
     return max(1, cores // max(1, workers))
-
-
-# ---------------------------------------------------------------- worker side
-
-@dataclass
-class ShardResult:
-    """What a worker sends back for one shard (plain data: crosses process/Ray boundaries)."""
-
-    index: int
-    info: dict[str, Any] | None  # ShardInfo.to_dict() when the shard file was written
-    failures: list[dict[str, str]] = field(default_factory=list)  # {key, error} per failed sample
-    timings: dict[str, float] = field(default_factory=dict)  # summed per-stage seconds
-    error: str | None = None  # shard-level failure (nothing written)
-
-
-def one_line(exc: BaseException) -> str:
-    """``Type: first line of message`` — what the manifest and the summary show."""
-    msg = str(exc).strip().splitlines()
-    return f"{type(exc).__name__}: {msg[0] if msg else ''}".rstrip(": ")
-
-
-def run_shard(producer: Any, out: str, task: ShardTask, storage_options: Mapping[str, Any] | None = None,
-              on_sample: ProgressFn | None = None, retries: int = RETRIES) -> ShardResult:
-    """Produce and write every sample of ``task`` with ``producer`` (``produce(index) -> (members, meta)``).
-
-    A sample that raises is retried ``retries`` times, then recorded in ``failures`` and
-    skipped; the shard still completes with the others. Only a failure of the shard file
-    itself (disk, upload) makes the whole shard fail; then nothing final is written.
-    """
-    from crackgen.shards import ShardWriter
-
-    failures: list[dict[str, str]] = []
-    totals: dict[str, float] = {}
-    try:
-        with ShardWriter(out, task.index, storage_options=storage_options) as writer:
-            for i in task.samples:
-                key = sample_key_for(task.index, i)
-                err: BaseException | None = None
-                for _attempt in range(1 + retries):
-                    try:
-                        members, meta = producer.produce(i)
-                        t0 = time.perf_counter()
-                        writer.add(key, {**members, "json": meta})
-                        dt = time.perf_counter() - t0
-                        for k, v in meta["timings"].items():
-                            totals[k] = totals.get(k, 0.0) + float(v)
-                        totals["encode_write"] = totals.get("encode_write", 0.0) + dt
-                        err = None
-                        break
-                    except Exception as exc:  # noqa: BLE001 - the failure policy is the point
-                        err = exc
-                if err is not None:
-                    failures.append({"key": key, "error": one_line(err)})
-                if on_sample is not None:
-                    on_sample(1)
-        info = writer.info.to_dict()
-    except Exception as exc:  # noqa: BLE001
-        return ShardResult(task.index, None, failures, totals, error=one_line(exc))
-    return ShardResult(task.index, info, failures, totals)
 
 
 # ---------------------------------------------------------------- output directory
@@ -202,8 +128,6 @@ def prepare_output(recipe: Recipe, out: str, resume: bool, storage_options: Mapp
                             storage_options=storage_options)
     if not is_url(out):
         os.makedirs(local_path(out), exist_ok=True)
-        from crackgen.shards import clean_partials
-
         clean_partials(out)
     todo = []
     for task in plan:
@@ -263,7 +187,7 @@ class Summary:
 class GenerateOptions:
     out: str
     workers: int = 1
-    backend: str = "local"  # local | ray
+    backend: str = "local"  # a key of backends.BACKENDS: local | ray
     ray_address: str | None = None
     samples: int | None = None
     resume: bool = False
@@ -273,16 +197,15 @@ class GenerateOptions:
 
 def generate(recipe: Recipe, opts: GenerateOptions, log: Callable[[str], None] | None = None) -> Summary:
     """Make (or finish) the dataset of ``recipe`` in ``opts.out``; returns the run summary."""
-    from crackgen.datagen import backends
-
     log = log or (lambda s: print(s, file=sys.stderr))
-    if opts.backend not in ("local", "ray"):
-        raise GenerateError(f"--backend must be 'local' or 'ray', got {opts.backend!r}")
+    make_backend = BACKENDS.get(opts.backend)
+    if make_backend is None:
+        raise GenerateError(f"--backend must be one of {', '.join(BACKENDS)}, got {opts.backend!r}")
     if opts.workers < 1:
         raise GenerateError(f"--workers must be >= 1, got {opts.workers}")
     recipe = effective_recipe(recipe, opts.samples)
     manifest, todo, notes = prepare_output(recipe, opts.out, opts.resume, opts.storage_options,
-                                           versions=backends.worker_versions())
+                                           versions=worker_versions())
     summary = Summary(out=opts.out, skipped_shards=recipe.num_shards - len(todo), redone=notes)
     for n in notes:
         log(f"redoing {n}")
@@ -299,10 +222,8 @@ def generate(recipe: Recipe, opts: GenerateOptions, log: Callable[[str], None] |
             manifest.mark_failed(res.index, res.failures + [{"key": "*", "error": res.error or "unknown"}])
             summary.shard_errors.append(f"shard {res.index}: {res.error}")
         else:
-            from crackgen.shards.manifest import ShardInfo
-
             info = ShardInfo(**res.info)
-            manifest.mark_done(info, res.failures)
+            manifest.mark_done(info, res.failures, timings=res.timings)
             summary.shards += 1
             summary.samples += info.samples
             summary.bytes += info.bytes
@@ -311,13 +232,9 @@ def generate(recipe: Recipe, opts: GenerateOptions, log: Callable[[str], None] |
             summary.timings[k] = summary.timings.get(k, 0.0) + v
         manifest.save()
 
-    job = backends.Job(recipe_text=recipe.text, out=opts.out, threads=threads,
-                       storage_options=dict(opts.storage_options))
+    job = Job(recipe_text=recipe.text, out=opts.out, threads=threads, storage_options=dict(opts.storage_options))
     try:
-        if opts.backend == "local":
-            summary.aborted = backends.run_local(job, todo, opts.workers, on_result, bar.update)
-        else:
-            summary.aborted = backends.run_ray(job, todo, opts.workers, on_result, bar.update, opts.ray_address)
+        summary.aborted = make_backend(opts.ray_address).run(job, todo, opts.workers, on_result, bar.update)
     finally:
         bar.close()
         summary.wall_s = time.perf_counter() - t0

@@ -2,8 +2,10 @@
 
 One ``SampleProducer`` lives per worker process. It builds the Blender scene the first
 time it renders (so importing this module never imports bpy) and then only updates
-it per sample. Every stage is timed (``perf_counter``) and the timings go into the
-sample's JSON, which is how ``crackgen bench`` finds where time goes.
+it per sample. Every stage is timed (``perf_counter``); the timings stay on the
+``Sample`` (``crackgen bench`` reads them there, ``generate`` sums them per shard into
+the manifest) and never go into the sample's JSON, so two runs of one recipe write
+byte-identical shards.
 
 Where GT comes from: the GT mask and ``depth.exr`` are ray cast at pixel centres on
 the very mesh Blender renders (``groundtruth.view_ground_truth``), not taken from
@@ -19,6 +21,7 @@ import dataclasses
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from importlib.metadata import PackageNotFoundError, version
 from typing import Any, Iterator
 
 import numpy as np
@@ -27,6 +30,17 @@ import crackgen
 from crackgen.config.recipe import Recipe
 from crackgen.config.spec import SampleSpec, make_spec
 from crackgen.errors import CrackgenError
+from crackgen.procedural.crackmap import crack_map
+from crackgen.procedural.materials import material_maps
+from crackgen.procedural.shadow_pattern import shadow_alpha
+from crackgen.procedural.surface import surface_faces, surface_uvs, surface_vertices
+from crackgen.sim.groundtruth import view_ground_truth
+from crackgen.sim.raycast import MeshRaycaster
+from crackgen.sim.rig import make_rig
+from crackgen.sim.sensors import sensor_rng
+from crackgen.sim.sensors.lidar import simulate_lidar
+from crackgen.sim.sensors.stereo import simulate_stereo
+from crackgen.sim.sensors.tof import albedo_from_map, simulate_tof
 
 STAGES = ("spec", "crackmap", "surface", "materials", "shadow", "scene_update", "render",
           "raycast", "groundtruth", "tof", "lidar", "stereo")
@@ -43,8 +57,8 @@ class Sample:
 
     index: int
     members: dict[str, Any]  # member name (``rgb.png``...) -> array / dict of arrays
-    meta: dict[str, Any]
-    timings: dict[str, float] = field(default_factory=dict)
+    meta: dict[str, Any]  # KEY.json: a function of (recipe, index) only, nothing run-dependent
+    timings: dict[str, float] = field(default_factory=dict)  # per-stage seconds, never written to the shard
 
 
 class _Timer:
@@ -114,14 +128,6 @@ class SampleProducer:
     # ---- one sample
     def make(self, index: int) -> Sample:
         """Run every stage for sample ``index``; raises ``PipelineError`` naming the stage."""
-        from crackgen.procedural.crackmap import crack_map
-        from crackgen.sim.groundtruth import view_ground_truth
-        from crackgen.procedural.materials import material_maps
-        from crackgen.sim.raycast import MeshRaycaster
-        from crackgen.sim.rig import make_rig
-        from crackgen.procedural.shadow_pattern import shadow_alpha
-        from crackgen.procedural.surface import surface_faces, surface_uvs, surface_vertices
-
         tm = _Timer(index)
         with tm.stage("spec"):
             spec: SampleSpec = make_spec(self.recipe, index)
@@ -158,9 +164,6 @@ class SampleProducer:
         sensors: dict[str, Any] = {}
         tof = None
         if spec.tof.enabled:
-            from crackgen.sim.sensors import sensor_rng
-            from crackgen.sim.sensors.tof import albedo_from_map, simulate_tof
-
             with tm.stage("tof"):
                 tof = simulate_tof(spec.tof, rig, caster, albedo_from_map(maps.albedo), sensor_rng(spec.tof.seed))
             members["tof.exr"] = tof.depth_rgb
@@ -169,16 +172,11 @@ class SampleProducer:
             sensors["tof"] = {"fill_rgb": fill_ratio(tof.depth_rgb), "valid": float(tof.valid.mean()),
                               "mixed": int(tof.mixed.sum())}
         if spec.lidar.enabled:
-            from crackgen.sim.sensors import sensor_rng
-            from crackgen.sim.sensors.lidar import simulate_lidar
-
             with tm.stage("lidar"):
                 lidar = simulate_lidar(spec.lidar, rig, caster, sensor_rng(spec.lidar.seed))
             members["lidar.exr"] = lidar.depth_rgb
             sensors["lidar"] = {"fill_rgb": fill_ratio(lidar.depth_rgb), "points": int(len(lidar.points_world))}
         if rig.right is not None:
-            from crackgen.sim.sensors.stereo import simulate_stereo
-
             with tm.stage("stereo"):
                 st = simulate_stereo(spec.stereo, rig, out.rgb, out.right_rgb, gt.depth, tof)
             members["right.png"] = out.right_rgb
@@ -222,12 +220,11 @@ class SampleProducer:
             "render": {"device": scene_meta.get("device"), "lights": scene_meta.get("lights")},
             "recipe_hash": self.recipe.hash,
             "versions": {"crackgen": crackgen.__version__, "spec": spec.version, **_blender_version()},
-            "timings": {k: round(v, 6) for k, v in tm.t.items()},
         }
         return Sample(index=int(index), members=members, meta=meta, timings=tm.t)
 
     def produce(self, index: int) -> tuple[dict[str, Any], dict[str, Any]]:
-        """(members, meta) for ``run_shard``; the writer adds ``json`` = meta."""
+        """(members, meta) of sample ``index``: what a shard holds for it (``json`` = meta)."""
         s = self.make(index)
         return s.members, s.meta
 
@@ -238,8 +235,6 @@ _BLENDER_VERSION: dict[str, str] | None = None
 def _blender_version() -> dict[str, str]:
     global _BLENDER_VERSION
     if _BLENDER_VERSION is None:
-        from importlib.metadata import PackageNotFoundError, version
-
         try:
             _BLENDER_VERSION = {"bpy": version("bpy")}
         except PackageNotFoundError:

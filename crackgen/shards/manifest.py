@@ -215,6 +215,8 @@ class ShardRecord:
     sha256: str = ""
     bytes: int = 0
     failures: list[dict[str, str]] = field(default_factory=list)
+    # per-stage seconds summed over the shard: kept here, not in the samples, so shards stay byte-identical
+    timings: dict[str, float] = field(default_factory=dict)
 
     STATUSES = ("done", "failed")
 
@@ -222,6 +224,7 @@ class ShardRecord:
         return {
             "name": self.name, "index": self.index, "status": self.status, "samples": self.samples,
             "sha256": self.sha256, "bytes": self.bytes, "failures": list(self.failures),
+            "timings": {k: round(v, 6) for k, v in sorted(self.timings.items())},
         }
 
     @classmethod
@@ -232,6 +235,7 @@ class ShardRecord:
                 samples=int(d.get("samples", 0)), sha256=str(d.get("sha256", "")),
                 bytes=int(d.get("bytes", 0)),
                 failures=[{"key": str(f["key"]), "error": str(f["error"])} for f in d.get("failures", [])],
+                timings={str(k): float(v) for k, v in dict(d.get("timings", {})).items()},
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise ManifestError(f"{where}: bad shard entry {dict(d)!r}: {exc!r}") from None
@@ -407,10 +411,13 @@ class Manifest:
         return self.problem(index, verify) is None
 
     # ---- updates (driver only)
-    def mark_done(self, info: ShardInfo, failures: Iterable[Any] = ()) -> ShardRecord:
-        """Record a finished shard; ``failures`` lists samples left out of it ({key, error})."""
+    def mark_done(self, info: ShardInfo, failures: Iterable[Any] = (),
+                  timings: Mapping[str, float] | None = None) -> ShardRecord:
+        """Record a finished shard; ``failures`` lists samples left out of it ({key, error}),
+        ``timings`` its per-stage seconds summed over its samples."""
         rec = ShardRecord(name=info.name, index=info.index, status="done", samples=info.samples,
-                          sha256=info.sha256, bytes=info.bytes, failures=_failures(failures))
+                          sha256=info.sha256, bytes=info.bytes, failures=_failures(failures),
+                          timings={str(k): float(v) for k, v in (timings or {}).items()})
         self._shards[rec.index] = rec
         return rec
 

@@ -135,6 +135,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from crackgen.datagen.backends import BACKENDS  # the --backend choices (registry keys)
+
     p = argparse.ArgumentParser(prog="crackgen", description="Synthetic RGB-D crack datasets from headless Blender.")
     p.add_argument("--version", action="version", version=f"crackgen {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
@@ -143,7 +145,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("recipe")
     g.add_argument("--out", required=True, help="output directory or fsspec URL (s3://bucket/path)")
     g.add_argument("--workers", type=int, default=1, help="worker processes (local) or CPUs (local Ray); default 1")
-    g.add_argument("--backend", choices=("local", "ray"), default="local", help="local process pool or Ray tasks")
+    g.add_argument("--backend", choices=tuple(BACKENDS), default="local", help="local process pool or Ray tasks")
     g.add_argument("--ray-address", default=None, help="Ray cluster address (default: start a local Ray)")
     g.add_argument("--samples", type=int, default=None, help="override dataset.samples (changes the recipe hash)")
     g.add_argument("--resume", action="store_true", help="continue a dataset: keep verified shards, redo the rest")

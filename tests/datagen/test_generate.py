@@ -1,9 +1,10 @@
 """`crackgen generate`: shards readable two ways, manifest, determinism, crashes and resume.
 
 One tiny reference dataset (6 samples, 3 shards, 64x48 px, 2 spp) is made once with
-one worker; every other run is compared with it key by key (mask, depth, sensors,
-metadata minus timings), so "0 lost, 0 duplicated, identical content" is checked
-against an uninterrupted run.
+one worker; every other run (again, two workers, killed and resumed, corrupted and
+redone) is compared with it key by key (mask, depth, sensors, metadata), so "0 lost,
+0 duplicated, identical content" is checked against an uninterrupted run, and then
+shard by shard: same sha256 in both manifests and equal bytes on disk.
 """
 from __future__ import annotations
 
@@ -18,12 +19,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from crackgen.datagen.generate import GenerateOptions, ShardTask, generate, plan_shards, run_shard, effective_recipe
-from crackgen.shards.manifest import Manifest
-from crackgen.config.recipe import parse_recipe
-from crackgen.shards import iter_samples, verify_dataset
 from tiny_recipes import tiny_recipe
+
+from crackgen.config.recipe import parse_recipe
+from crackgen.datagen.generate import GenerateOptions, effective_recipe, generate, plan_shards
+from crackgen.datagen.pipeline import Sample
+from crackgen.datagen.tasks import ShardTask, run_shard
+from crackgen.shards import iter_samples, verify_dataset
+from crackgen.shards.manifest import Manifest
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 
@@ -38,13 +41,11 @@ def tiny_recipe_file(tmp: Path) -> Path:
 
 
 def content(root) -> dict[str, dict]:
-    """key -> comparable content (arrays + meta without timings); fails on duplicate keys."""
+    """key -> comparable content (arrays + meta); fails on duplicate keys."""
     out = {}
     for s in iter_samples(str(root)):
         assert s["__key__"] not in out, f"duplicated sample {s['__key__']}"
-        meta = dict(s["meta"])
-        meta.pop("timings")
-        out[s["__key__"]] = {**{k: s[k] for k in COMPARE if k in s}, "meta": meta, "rgb": s["rgb"]}
+        out[s["__key__"]] = {**{k: s[k] for k in COMPARE if k in s}, "meta": s["meta"], "rgb": s["rgb"]}
     return out
 
 
@@ -59,6 +60,17 @@ def assert_same(a: dict, b: dict) -> None:
             else:
                 np.testing.assert_array_equal(x, y, err_msg=f"{key}.{name}")
         assert a[key]["meta"] == b[key]["meta"], key
+
+
+def assert_same_bytes(a: Path, b: Path) -> None:
+    """Every shard of dataset ``b`` is byte for byte the one of ``a``: same sha256 in both
+    manifests, and equal bytes on disk (so the manifests are not just agreeing with themselves)."""
+    ma, mb = Manifest.load(a), Manifest.load(b)
+    assert [r.name for r in ma.done()] == [r.name for r in mb.done()] == [f"shard-{i:06d}.tar" for i in range(3)]
+    for ra, rb in zip(ma.done(), mb.done()):
+        assert ra.sha256 == rb.sha256, f"{ra.name}: sha256 differs between the two runs"
+        assert (a / ra.name).read_bytes() == (b / rb.name).read_bytes(), ra.name
+    assert sorted(p.name for p in a.glob("shard-*.tar")) == sorted(p.name for p in b.glob("shard-*.tar"))
 
 
 @pytest.fixture(scope="module")
@@ -107,7 +119,8 @@ def test_tiny_dataset_readable_and_manifest_complete(reference):
     meta = s["meta"]
     assert {"rgb", "right", "tof", "lidar"} <= set(meta["cameras"])
     assert meta["spec"]["index"] == 0 and meta["crack"]["length_m"] > 0
-    assert {"render", "crackmap", "tof"} <= set(meta["timings"])
+    # timings vary run to run: they live in the manifest, per shard, never in a sample's JSON
+    assert all("timings" not in c[k]["meta"] for k in c)
     # GT mask only where the surface is seen, and its crack fraction is what the meta says
     assert meta["crack"]["pixel_fraction"] == pytest.approx((s["mask"] > 0).mean())
 
@@ -126,16 +139,28 @@ def test_tiny_dataset_readable_and_manifest_complete(reference):
     m = Manifest.load(out)
     assert m.num_shards == 3 and len(m.done()) == 3 and m.num_samples == 6
     assert all(not r.failures for r in m.shards)
+    for r in m.shards:
+        assert {"render", "crackmap", "tof", "encode_write"} <= set(r.timings), r.timings
+        assert all(v >= 0 for v in r.timings.values()) and r.timings["render"] > 0
+    summary_t = reference["summary"].timings
+    assert summary_t["render"] == pytest.approx(sum(r.timings["render"] for r in m.shards), abs=1e-5)
     assert m.recipe_text.strip() == TINY.strip() and m.recipe_hash == parse_recipe(TINY).hash
     assert verify_dataset(str(out)) == []
     assert reference["summary"].samples == 6 and reference["summary"].bytes == sum(r.bytes for r in m.shards)
 
 
-def test_two_workers_give_identical_content(reference, tmp_path):
+def test_same_recipe_twice_gives_byte_identical_shards(reference, tmp_path):
+    summary = generate(parse_recipe(TINY), GenerateOptions(out=str(tmp_path / "again"), workers=1, progress=False))
+    assert summary.ok
+    assert_same(content(tmp_path / "again"), reference["content"])
+    assert_same_bytes(reference["out"], tmp_path / "again")
+
+
+def test_two_workers_give_byte_identical_shards(reference, tmp_path):
     summary = generate(parse_recipe(TINY), GenerateOptions(out=str(tmp_path / "w2"), workers=2, progress=False))
     assert summary.ok
-    got = content(tmp_path / "w2")
-    assert_same(got, reference["content"])
+    assert_same(content(tmp_path / "w2"), reference["content"])
+    assert_same_bytes(reference["out"], tmp_path / "w2")
 
 
 # ---------------------------------------------------------------- crashes and resume
@@ -187,6 +212,7 @@ def test_kill_one_worker_mid_shard_then_resume(reference, tmp_path):
     assert summary.ok and summary.skipped_shards == len(m.done())
     assert not list(out.glob("*.partial"))
     assert_same(content(out), reference["content"])
+    assert_same_bytes(reference["out"], out)
 
 
 def test_kill_whole_run_then_resume(reference, tmp_path):
@@ -203,6 +229,9 @@ def test_kill_whole_run_then_resume(reference, tmp_path):
     assert p.returncode == 0, stderr[-2000:]
     assert f"({n_done} already done)" in stdout
     assert_same(content(out), reference["content"])
+    assert_same_bytes(reference["out"], out)
+    # shards kept from the killed run keep their recorded timings; redone ones get new ones
+    assert all(r.timings.get("render", 0) > 0 for r in Manifest.load(out).done())
 
 
 def test_truncated_and_corrupted_shards_are_named_and_redone(reference, tmp_path):
@@ -223,6 +252,7 @@ def test_truncated_and_corrupted_shards_are_named_and_redone(reference, tmp_path
     assert sorted(n.split(":")[0] for n in summary.redone) == ["shard-000001.tar", "shard-000002.tar"]
     assert verify_dataset(str(out)) == []
     assert_same(content(out), reference["content"])
+    assert_same_bytes(reference["out"], out)
 
 
 def test_resume_refuses_other_recipe(reference, tmp_path):
@@ -245,7 +275,7 @@ class _Replay:
         self.samples = {s["meta"]["index"]: s for s in iter_samples(str(ref))}
         self.always_fail, self.fail_once, self.calls = always_fail, set(fail_once), []
 
-    def produce(self, index: int):
+    def make(self, index: int) -> Sample:
         self.calls.append(index)
         if index in self.always_fail:
             raise RuntimeError(f"boom at {index}\nsecond line")
@@ -254,7 +284,7 @@ class _Replay:
             raise OSError("transient")
         s = self.samples[index]
         members = {"rgb.png": s["rgb"], "mask.png": s["mask"], "depth.exr": s["depth"]}
-        return members, {**s["meta"], "timings": dict(s["meta"]["timings"])}
+        return Sample(index, members, dict(s["meta"]), timings={"render": 0.25 * (index + 1), "crackmap": 0.5})
 
 
 def test_failed_sample_retried_once_then_recorded(reference, tmp_path):
@@ -265,3 +295,7 @@ def test_failed_sample_retried_once_then_recorded(reference, tmp_path):
     assert res.failures == [{"key": "000001-00002", "error": "RuntimeError: boom at 2"}]
     keys = [s["__key__"] for s in iter_samples(str(tmp_path / "shard-000001.tar"))]
     assert keys == ["000001-00003"]
+    # only the written sample's timings count, and they stay out of its JSON
+    assert res.timings["render"] == 1.0 and res.timings["crackmap"] == 0.5 and res.timings["encode_write"] > 0
+    (written,) = iter_samples(str(tmp_path / "shard-000001.tar"))
+    assert "timings" not in written["meta"]

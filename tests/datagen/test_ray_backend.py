@@ -42,16 +42,16 @@ def s3():
 
 def test_ray_backend_writes_to_s3(s3):
     pytest.importorskip("ray")
-    from crackgen.procedural.crackmap import crack_map
-    from crackgen.datagen.generate import GenerateOptions, generate
-    from crackgen.sim.groundtruth import view_ground_truth
-    from crackgen.shards.manifest import Manifest
-    from crackgen.sim.raycast import MeshRaycaster
     from crackgen.config.recipe import parse_recipe
-    from crackgen.sim.rig import make_rig
-    from crackgen.shards import iter_samples, verify_dataset
     from crackgen.config.spec import SampleSpec
+    from crackgen.datagen.generate import GenerateOptions, generate
+    from crackgen.procedural.crackmap import crack_map
     from crackgen.procedural.surface import surface_faces, surface_uvs, surface_vertices
+    from crackgen.shards import iter_samples, verify_dataset
+    from crackgen.shards.manifest import Manifest
+    from crackgen.sim.groundtruth import view_ground_truth
+    from crackgen.sim.raycast import MeshRaycaster
+    from crackgen.sim.rig import make_rig
 
     url = "s3://crackgen-test/ds"
     recipe = parse_recipe(RECIPE)
