@@ -9,6 +9,7 @@ import argparse
 import json
 import logging
 import sys
+from pathlib import Path
 from typing import Sequence
 
 from trainer.errors import TrainerInputError
@@ -29,7 +30,8 @@ def build_parser() -> argparse.ArgumentParser:
         ("seg", add_seg_args, "train a segmentation model (thesis defaults: DeepLabV3-R50, Adam 1e-4, batch 16, 30 epochs)"),
         ("evaluate", add_eval_args, "dataset-level metrics + PR curve of a checkpoint"),
         ("predict", add_predict_args, "masks, overlays and crack length for real photos"),
-        ("sim2real", add_sim2real_args, "synthetic vs real vs mixed training, evaluated on real test data"),
+        ("sim2real", add_sim2real_args,
+         "synthetic (+ adaptation) vs real vs mixed vs fine-tune, or the label-efficiency curve, on real test data"),
         ("split", add_split_args, "deterministic train/test split of a real folder"),
         ("bench", add_bench_args, "loader samples/s and model step time"),
     ):
@@ -66,8 +68,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         elif args.command == "sim2real":
             from trainer.sim2real import run_sim2real
 
-            run_sim2real(args)
-            print((__import__("pathlib").Path(args.out) / "sim2real.md").read_text())
+            res = run_sim2real(args)
+            report = Path(res["out"]) / "curve.md" if args.curve else Path(args.out) / "sim2real.md"
+            print(report.read_text())
+            print(f"wrote {report.parent}")
         elif args.command == "split":
             from trainer.split import run_split
 

@@ -1,32 +1,52 @@
-"""``cracktrain sim2real``: does synthetic data help on real cracks?
+"""``cracktrain sim2real``: does synthetic data help on real cracks, and how many labels does it save?
 
-Trains the same architecture with the same step budget on (a) synthetic only,
-(b) real only and (c) synthetic + real (real repeated N times, thesis rule),
-then evaluates each final model on the same real test set and writes
-``sim2real.json`` + ``sim2real.md`` (P/R/F1/IoU at each run's best-F1
-threshold, and at 0.5). The real test set is a folder (``--real-test``) or a
-deterministic fraction of ``--real`` (``--real-test-fraction``, ``--split-seed``).
-Runs whose inputs are missing (e.g. no ``--synthetic``) are listed as skipped.
+Rows (same architecture, step budget and seed; each final model scored on the same
+real test set, P/R/F1/IoU at its best-F1 threshold and F1 at 0.5):
+
+- ``synthetic``: synthetic shards only;
+- ``synthetic+fourier`` / ``+reinhard`` / ``+histogram`` / ``synthetic+adapt`` (all three
+  drawn per sample): synthetic shards adapted toward unlabeled target photos
+  (``--target``; with no folder, the *images* of the real training split, labels unused);
+- ``real``: the real training split only;
+- ``mixed``: synthetic + real (real repeated N times, thesis rule);
+- ``finetune``: synthetic pretraining for ``--finetune-fraction`` of the budget (adapted
+  when ``--target`` is given), then fine-tuning on the real split for the rest: the same
+  total step budget as every other row.
+
+``--curve 0,10,30,...`` instead runs the label-efficiency curve (``trainer.curve``):
+for each N and repeat, real-only and synthetic -> fine-tune on the same N photos with the
+same ``--curve-steps``; one synthetic pretraining (``--pretrain-steps``) is shared.
+
+The real test set is a folder (``--real-test``) or a deterministic fraction of ``--real``
+(``--real-test-fraction``, ``--split-seed``). Rows whose inputs are missing are skipped.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import logging
+import time
 from pathlib import Path
 from typing import Any
 
 import torch
 
 from trainer.builders import add_data_args, eval_loader, real_folder, sample_config_from_args
+from trainer.curve import CurvePoint, headline, nested_subsets, parse_sizes, plot_curve, summarise, table_lines
+from trainer.curve import write_csv as write_curve_csv
 from trainer.errors import TrainerInputError
 from trainer.evaluate import load_model
-from trainer.sources import split_fraction
+from trainer.site_adapt import targets_from_folder, targets_from_paths
+from trainer.sources import RealFolder, split_fraction
 from trainer.stream import SegStream
 from trainer.train import add_seg_args, evaluate
 from trainer.train import main as train_seg
 
 log = logging.getLogger(__name__)
+
+BASE_RUNS = ("synthetic", "real", "mixed", "finetune")
+ADAPT_RUNS = {"synthetic+fourier": "fourier", "synthetic+reinhard": "reinhard",
+              "synthetic+histogram": "histogram", "synthetic+adapt": "fourier,reinhard,histogram"}
 
 
 def add_sim2real_args(p: argparse.ArgumentParser) -> None:
@@ -36,21 +56,37 @@ def add_sim2real_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--real-test-fraction", type=float, default=0.0)
     p.add_argument("--split-seed", type=int, default=0)
     p.add_argument("--arch", default="lraspp_mobilenet_v3_large")
-    p.add_argument("--max-steps", type=int, default=300)
+    p.add_argument("--max-steps", type=int, default=300, help="step budget of every row")
     p.add_argument("--batch-size", "-b", type=int, default=4)
     p.add_argument("--crop", type=int, default=192)
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--loss", default="bce")
     p.add_argument("--workers", "-j", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--runs", default="synthetic,real,mixed", help="subset of synthetic,real,mixed")
+    p.add_argument("--runs", default=None,
+                   help=f"comma list of {', '.join(BASE_RUNS + tuple(ADAPT_RUNS))} "
+                        "(default: the four base rows, plus the adaptation rows with --target)")
+    p.add_argument("--target", nargs="?", const="", default=None, metavar="FOLDER",
+                   help="adapt synthetic RGB toward these unlabeled photos; no FOLDER: the real training split's images")
+    p.add_argument("--adapt-band", default="0.005,0.05", help="Fourier band MIN,MAX (fraction of min(H, W))")
+    p.add_argument("--adapt-prob", type=float, default=1.0, help="chance that a synthetic sample is adapted")
+    p.add_argument("--finetune-fraction", type=float, default=0.5,
+                   help="finetune row: share of --max-steps spent on synthetic pretraining")
+    p.add_argument("--curve", default=None, metavar="N,N,...", help="run the label-efficiency curve at these photo counts")
+    p.add_argument("--repeats", type=int, default=3, help="curve: repeats (different nested subsets and seeds)")
+    p.add_argument("--curve-steps", type=int, default=None, help="curve: steps per model on N photos (default --max-steps)")
+    p.add_argument("--pretrain-steps", type=int, default=None, help="curve: synthetic pretraining steps (default --max-steps)")
     p.add_argument("--out", default="runs/sim2real")
     p.add_argument("--device", default=None)
     p.add_argument("--no-progress", action="store_true")
     add_data_args(p)
 
 
-def _seg_args(args: argparse.Namespace, out: Path, data: str | None, real: str | None, stems: list[str] | None) -> argparse.Namespace:
+# ------------------------------------------------------------------ shared steps
+
+def seg_args(args: argparse.Namespace, out: Path, data: str | None, real: str | None, stems: list[str] | None,
+             **overrides: Any) -> argparse.Namespace:
+    """``cracktrain seg`` arguments for one training of this comparison."""
     p = argparse.ArgumentParser()
     add_seg_args(p)
     ns = p.parse_args([])
@@ -59,56 +95,204 @@ def _seg_args(args: argparse.Namespace, out: Path, data: str | None, real: str |
             setattr(ns, k, v)
     ns.data, ns.real, ns.real_stems, ns.out = data, real, stems, str(out)
     ns.val_fraction, ns.val_data, ns.val_real, ns.resume, ns.test_only = 0.0, None, None, None, False
+    ns.adapt_target, ns.adapt_targets, ns.init = None, None, None
+    for k, v in overrides.items():
+        setattr(ns, k, v)
     return ns
 
 
-def run_sim2real(args: argparse.Namespace) -> dict[str, Any]:
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+def real_split_for(args: argparse.Namespace) -> tuple[list[str] | None, str, list[str] | None]:
+    """(training stems or None for all, test folder, test stems or None)."""
     if args.real_test:
-        train_stems, test_root, test_stems = None, args.real_test, None
-    elif args.real_test_fraction > 0:
+        return None, args.real_test, None
+    if args.real_test_fraction > 0:
         keys = real_folder(args, args.real).keys
         train_stems, test_stems = split_fraction(keys, args.real_test_fraction, args.split_seed)
-        test_root = args.real
-    else:
-        raise TrainerInputError("give a real test set: --real-test FOLDER or --real-test-fraction F")
+        return train_stems, args.real, test_stems
+    raise TrainerInputError("give a real test set: --real-test FOLDER or --real-test-fraction F")
+
+
+def adaptation_targets(args: argparse.Namespace, train_stems: list[str] | None) -> tuple[str, ...] | None:
+    """Target photos: ``--target FOLDER``, or the real training split's images (never the test split's)."""
+    if args.target is None:
+        return None
+    if args.target:
+        return targets_from_folder(args.target)
+    folder = real_folder(args, args.real, train_stems)
+    return targets_from_paths([folder.image_path(k) for k in folder.keys])
+
+
+def score(checkpoint: Path, test: RealFolder, args: argparse.Namespace, device: torch.device) -> dict[str, Any]:
+    model, cfg, _ = load_model(checkpoint, device)
+    ds = SegStream(cfg, None, test, train=False, seed=args.seed, skip_bad=args.skip_bad)
+    return evaluate(model, eval_loader(ds, args.workers, device), device, device.type == "cuda").summary(0.5)
+
+
+def train_and_score(ns: argparse.Namespace, test: RealFolder, args: argparse.Namespace,
+                    device: torch.device) -> dict[str, Any]:
+    info = train_seg(ns)
+    s = score(Path(ns.out) / "checkpoint.pt", test, args, device)
+    return {"steps": info["step"], "train_seconds": round(info["seconds"], 1), "best": s["best"],
+            "at_0.5": s["at_threshold"]}
+
+
+def _device(args: argparse.Namespace) -> torch.device:
+    return torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+
+
+# ------------------------------------------------------------------ the rows
+
+def wanted_runs(args: argparse.Namespace) -> list[str]:
+    if args.runs is None:
+        return list(BASE_RUNS) + (list(ADAPT_RUNS) if args.target is not None else [])
+    runs = [r.strip() for r in args.runs.split(",") if r.strip()]
+    for r in runs:
+        if r not in BASE_RUNS and r not in ADAPT_RUNS:
+            raise TrainerInputError(f"--runs: unknown run {r!r} ({', '.join(BASE_RUNS + tuple(ADAPT_RUNS))})")
+        if r in ADAPT_RUNS and args.target is None:
+            raise TrainerInputError(f"--runs {r} needs --target (a folder, or none for the real training images)")
+    return runs
+
+
+def run_row(name: str, args: argparse.Namespace, out: Path, train_stems: list[str] | None,
+            targets: tuple[str, ...] | None, test: RealFolder, device: torch.device) -> dict[str, Any]:
+    """Train and score one row; a row that needs synthetic shards is skipped without them."""
+    if name != "real" and not args.synthetic:
+        return {"skipped": "no --synthetic shards given"}
+    stems = train_stems
+    if name == "real":
+        return train_and_score(seg_args(args, out / name, None, args.real, stems), test, args, device)
+    if name == "mixed":
+        return train_and_score(seg_args(args, out / name, args.synthetic, args.real, stems), test, args, device)
+    if name in ADAPT_RUNS:
+        ns = seg_args(args, out / name, args.synthetic, None, None, adapt_targets=targets,
+                      adapt_methods=ADAPT_RUNS[name])
+        return train_and_score(ns, test, args, device)
+    if name == "synthetic":
+        return train_and_score(seg_args(args, out / name, args.synthetic, None, None), test, args, device)
+    # finetune: pretrain on synthetic (adapted when targets exist), then the rest of the budget on real
+    if not 0.0 < args.finetune_fraction < 1.0:
+        raise TrainerInputError(f"--finetune-fraction must be in (0, 1), got {args.finetune_fraction}")
+    pre_steps = max(1, round(args.max_steps * args.finetune_fraction))
+    pre = seg_args(args, out / "finetune_pretrain", args.synthetic, None, None, max_steps=pre_steps,
+                   adapt_targets=targets)
+    t0 = time.perf_counter()
+    train_seg(pre)
+    ft = seg_args(args, out / name, None, args.real, stems, max_steps=args.max_steps - pre_steps,
+                  init=str(out / "finetune_pretrain" / "checkpoint.pt"))
+    res = train_and_score(ft, test, args, device)
+    res["pretrain_steps"] = pre_steps
+    res["pretrain_adapted"] = targets is not None
+    res["train_seconds"] = round(time.perf_counter() - t0, 1)
+    res["steps"] = args.max_steps
+    return res
+
+
+def run_sim2real(args: argparse.Namespace) -> dict[str, Any]:
+    if args.curve:
+        return run_curve(args)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    train_stems, test_root, test_stems = real_split_for(args)
     test = real_folder(args, test_root, test_stems)
-    wanted = [r.strip() for r in args.runs.split(",") if r.strip()]
-    plans = {"synthetic": (args.synthetic, None), "real": (None, args.real), "mixed": (args.synthetic, args.real)}
-    device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    runs = wanted_runs(args)
+    targets = adaptation_targets(args, train_stems) if any(r in ADAPT_RUNS or r == "finetune" for r in runs) else None
+    device = _device(args)
     results: dict[str, Any] = {}
-    for name in wanted:
-        if name not in plans:
-            raise TrainerInputError(f"--runs: unknown run {name!r} (synthetic, real, mixed)")
-        data, real = plans[name]
-        if name in ("synthetic", "mixed") and not args.synthetic:
-            results[name] = {"skipped": "no --synthetic shards given"}
-            continue
-        seg = _seg_args(args, out / name, data, real, train_stems if real else None)
-        log.info("sim2real: training '%s'", name)
-        info = train_seg(seg)
-        model, cfg, _ = load_model(out / name / "checkpoint.pt", device)
-        ds = SegStream(cfg, None, test, train=False, seed=args.seed, skip_bad=args.skip_bad)
-        hist = evaluate(model, eval_loader(ds, args.workers, device), device, device.type == "cuda")
-        s = hist.summary(0.5)
-        results[name] = {"steps": info["step"], "train_seconds": round(info["seconds"], 1),
-                         "best": s["best"], "at_0.5": s["at_threshold"]}
+    for i, name in enumerate(runs, 1):
+        log.info("sim2real: row %d/%d '%s'", i, len(runs), name)
+        results[name] = run_row(name, args, out, train_stems, targets, test, device)
+    n_real = len(train_stems) if train_stems is not None else len(real_folder(args, args.real))
     table = {"arch": args.arch, "channels": sample_config_from_args(args).channels, "max_steps": args.max_steps,
-             "batch_size": args.batch_size, "crop": args.crop, "real_train": args.real,
-             "real_train_images": len(train_stems) if train_stems is not None else len(real_folder(args, args.real)),
-             "real_test": test_root, "real_test_images": len(test), "synthetic": args.synthetic, "runs": results}
+             "batch_size": args.batch_size, "crop": args.crop, "seed": args.seed, "real_train": args.real,
+             "real_train_images": n_real, "real_test": test_root, "real_test_images": len(test),
+             "synthetic": args.synthetic, "target": describe_target(args, targets), "runs": results}
     (out / "sim2real.json").write_text(json.dumps(table, indent=2))
-    lines = [f"# Sim-to-real: {args.arch}, {args.max_steps} steps, batch {args.batch_size}, crop {args.crop}", "",
-             f"Real test: {test_root} ({len(test)} images). Metrics summed over the test set; "
-             "P/R/F1/IoU at each run's best-F1 threshold (F1 at 0.5 in the last column).", "",
-             "| training data | threshold | precision | recall | F1 | IoU | F1 @ 0.5 |", "|---|---|---|---|---|---|---|"]
-    for name, r in results.items():
+    (out / "sim2real.md").write_text("\n".join(rows_markdown(args, table, test_root, len(test))) + "\n")
+    return table
+
+
+def describe_target(args: argparse.Namespace, targets: tuple[str, ...] | None) -> str | None:
+    if targets is None:
+        return None
+    where = args.target or "the real training split's images (labels unused)"
+    return f"{where}: {len(targets)} photos"
+
+
+def rows_markdown(args: argparse.Namespace, table: dict[str, Any], test_root: str, n_test: int) -> list[str]:
+    lines = [f"# Sim-to-real: {args.arch}, {args.max_steps} steps, batch {args.batch_size}, crop {args.crop}, "
+             f"seed {args.seed}", "",
+             f"Real test: {test_root} ({n_test} images). Metrics summed over the test set; "
+             "P/R/F1/IoU at each run's best-F1 threshold (F1 at 0.5 in the last column)."]
+    if table["target"]:
+        lines.append(f"Adaptation target: {table['target']}.")
+    lines += ["", "| training data | threshold | precision | recall | F1 | IoU | F1 @ 0.5 |",
+              "|---|---|---|---|---|---|---|"]
+    for name, r in table["runs"].items():
         if "skipped" in r:
             lines.append(f"| {name} | skipped: {r['skipped']} | | | | | |")
         else:
             b = r["best"]
             lines.append(f"| {name} | {b['threshold']:.2f} | {b['precision']:.3f} | {b['recall']:.3f} | "
                          f"{b['f1']:.3f} | {b['iou']:.3f} | {r['at_0.5']['f1']:.3f} |")
-    (out / "sim2real.md").write_text("\n".join(lines) + "\n")
-    return table
+    return lines
+
+
+# ------------------------------------------------------------------ the label-efficiency curve
+
+def run_curve(args: argparse.Namespace) -> dict[str, Any]:
+    """Real-only vs synthetic -> fine-tune on nested subsets of N labelled photos (see trainer.curve)."""
+    if not args.synthetic:
+        raise TrainerInputError("--curve needs --synthetic shards for the fine-tune arm")
+    if args.repeats < 1:
+        raise TrainerInputError(f"--repeats must be >= 1, got {args.repeats}")
+    sizes = parse_sizes(args.curve)
+    out = Path(args.out) / "curve"
+    out.mkdir(parents=True, exist_ok=True)
+    train_stems, test_root, test_stems = real_split_for(args)
+    if train_stems is None:
+        train_stems = real_folder(args, args.real).keys
+    test = real_folder(args, test_root, test_stems)
+    targets = adaptation_targets(args, train_stems)
+    steps = args.curve_steps or args.max_steps
+    device = _device(args)
+    log.info("curve: synthetic pretraining (%d steps%s)", args.pretrain_steps or args.max_steps,
+             ", adapted" if targets else "")
+    pre = seg_args(args, out / "pretrain", args.synthetic, None, None,
+                   max_steps=args.pretrain_steps or args.max_steps, adapt_targets=targets)
+    pre_info = train_seg(pre)
+    pre_ckpt = out / "pretrain" / "checkpoint.pt"
+    points: list[CurvePoint] = []
+    jobs = [(r, n, arm) for r in range(args.repeats) for n in sizes for arm in ("real", "finetune")
+            if not (n == 0 and arm == "real")]
+    t_start = time.perf_counter()
+    for k, (r, n, arm) in enumerate(jobs, 1):
+        subset = nested_subsets(train_stems, sizes, args.seed, r)[n]
+        log.info("curve %d/%d: repeat %d, N=%d, %s", k, len(jobs), r, n, arm)
+        t0 = time.perf_counter()
+        if n == 0:
+            s, trained = score(pre_ckpt, test, args, device), 0
+        else:
+            ns = seg_args(args, out / f"r{r}" / f"n{n:04d}_{arm}", None, args.real, subset, max_steps=steps,
+                          seed=args.seed + r, init=str(pre_ckpt) if arm == "finetune" else None)
+            train_seg(ns)
+            s, trained = score(Path(ns.out) / "checkpoint.pt", test, args, device), steps
+        b = s["best"]
+        points.append(CurvePoint(n=n, repeat=r, arm=arm, f1=b["f1"], precision=b["precision"], recall=b["recall"],
+                                 iou=b["iou"], threshold=b["threshold"], steps=trained,
+                                 seconds=round(time.perf_counter() - t0, 1)))
+        write_curve_csv(points, out / "curve.csv")  # after every point: an interrupted curve keeps what it has
+    summary = summarise(points)
+    title = (f"{args.arch}, {steps} steps per model, pretrain {pre_info['step']} steps"
+             f"{' (adapted)' if targets else ''}, {args.repeats} repeats")
+    plot_curve(summary, out / "curve.png", title)
+    head = headline(summary, 30)
+    md = [f"# Label-efficiency curve: {title}", "", f"Real test: {test_root} ({len(test)} images).", "",
+          *table_lines(summary), "", f"**{head}**", "",
+          f"Wall time: {time.perf_counter() - t_start + pre_info['seconds']:.0f} s "
+          f"(pretraining {pre_info['seconds']:.0f} s)."]
+    (out / "curve.md").write_text("\n".join(md) + "\n")
+    result = {"sizes": sizes, "repeats": args.repeats, "steps": steps, "pretrain_steps": pre_info["step"],
+              "adapted": targets is not None, "headline": head, "summary": summary, "out": str(out)}
+    (out / "curve.json").write_text(json.dumps(result, indent=2))
+    return result

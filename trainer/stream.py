@@ -35,6 +35,7 @@ from torch.utils.data import IterableDataset, get_worker_info
 
 from trainer.augment import SampleConfig, sample_generator, sample_to_tensors
 from trainer.errors import TrainerInputError
+from trainer.site_adapt import SiteAdaptation
 from trainer.sources import RealFolder, ShardSource
 
 log = logging.getLogger(__name__)
@@ -69,6 +70,7 @@ class SegStream(IterableDataset):
         seed: int = 0,
         skip_bad: bool = False,
         shuffle_buffer: int = 64,
+        adapt: SiteAdaptation | None = None,
     ) -> None:
         super().__init__()
         if shards is None and real is None:
@@ -77,6 +79,7 @@ class SegStream(IterableDataset):
         self.real_repeat = max(1, int(real_repeat)) if real is not None else 0
         self.batch_size, self.train, self.seed = batch_size, train, seed
         self.skip_bad, self.shuffle_buffer = skip_bad, shuffle_buffer
+        self.adapt = adapt if train else None  # site adaptation of synthetic RGB (training only)
         self.epoch, self.skip_batches = 0, 0
         self.num_workers = 0  # set by the training script to the DataLoader's value
 
@@ -216,6 +219,9 @@ class SegStream(IterableDataset):
             emitted += 1
             if emitted <= skip:
                 continue
+            if src == 0 and self.adapt is not None:
+                rng = np.random.default_rng(np.random.SeedSequence([self.seed, self.epoch, 4, *ids]))
+                sample = {**sample, "rgb": self.adapt.apply(sample["rgb"], rng)}
             g = sample_generator(self.seed, self.epoch, *ids) if self.train else None
             out = sample_to_tensors(sample, self.cfg, g)
             out["key"] = sample["key"]

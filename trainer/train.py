@@ -39,6 +39,7 @@ from trainer.errors import TrainerInputError
 from trainer.losses import LOSSES, make_loss
 from trainer.metrics import ConfusionHistogram
 from trainer.models import ARCHS, build_model
+from trainer.site_adapt import SiteAdaptation, parse_band, targets_from_folder
 from trainer.sources import ShardSource
 from trainer.stream import SegStream, dist_info, mix_repeat
 
@@ -77,6 +78,13 @@ def add_seg_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--log-every", type=int, default=10)
     p.add_argument("--out", default="runs/seg", help="output folder (checkpoints, log.csv, tensorboard)")
     p.add_argument("--resume", default=None, help="checkpoint to continue from")
+    p.add_argument("--init", default=None, metavar="CKPT",
+                   help="start from this checkpoint's weights (e.g. synthetic pretraining), fresh optimizer and steps")
+    g = p.add_argument_group("site adaptation of synthetic RGB toward unlabeled photos (training only)")
+    g.add_argument("--adapt-target", default=None, metavar="FOLDER", help="folder of unlabeled target photos")
+    g.add_argument("--adapt-methods", default="fourier,reinhard,histogram", help="methods drawn uniformly per sample")
+    g.add_argument("--adapt-band", default="0.005,0.05", help="Fourier band MIN,MAX (fraction of min(H, W))")
+    g.add_argument("--adapt-prob", type=float, default=1.0, help="chance that a synthetic sample is adapted")
     p.add_argument("--test-only", action="store_true", help="only validate the --resume checkpoint")
     p.add_argument("--no-progress", action="store_true")
     add_data_args(p)
@@ -200,9 +208,33 @@ def build_datasets(args: argparse.Namespace) -> tuple[SegStream, SegStream | Non
         val_real = real_split(args, args.val_real, 0.0, 0)[0]
     repeat = args.real_repeat or (mix_repeat(len(real), len(syn)) if (real is not None and syn is not None) else 1)
     train_ds = SegStream(cfg, syn, real, real_repeat=repeat, batch_size=args.batch_size, train=True,
-                         seed=args.seed, skip_bad=args.skip_bad)
+                         seed=args.seed, skip_bad=args.skip_bad, adapt=site_adaptation(args) if syn else None)
     eval_cfg = SampleConfig(**{**cfg.__dict__, "crop": None})
     return train_ds, eval_stream(args, eval_cfg, val_syn, val_real)
+
+
+def site_adaptation(args: argparse.Namespace) -> SiteAdaptation | None:
+    """From ``--adapt-target`` (a folder), or ``args.adapt_targets`` (paths set by sim2real)."""
+    targets = getattr(args, "adapt_targets", None)
+    if not targets and getattr(args, "adapt_target", None):
+        targets = targets_from_folder(args.adapt_target)
+    if not targets:
+        return None
+    methods = tuple(m.strip() for m in args.adapt_methods.split(",") if m.strip())
+    return SiteAdaptation(tuple(targets), methods, parse_band(args.adapt_band), args.adapt_prob)
+
+
+def load_init_weights(path: str, bare: torch.nn.Module, args: argparse.Namespace) -> None:
+    """Weights only from ``--init`` (pretrain -> fine-tune); arch and input channels must match."""
+    ckpt = load_checkpoint(path)
+    src = ckpt.get("args", {})
+    if src.get("arch") not in (None, args.arch):
+        raise TrainerInputError(f"--init {path}: checkpoint is a {src.get('arch')}, this run trains a {args.arch}")
+    try:
+        bare.load_state_dict(ckpt["model"])
+    except RuntimeError as exc:
+        first = str(exc).strip().splitlines()[0]
+        raise TrainerInputError(f"--init {path}: weights do not fit this model ({first})") from None
 
 
 def build_network(args: argparse.Namespace, in_channels: int, device: torch.device,
@@ -419,6 +451,8 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
     sched = build_lr_scheduler(args, opt, total)
     scaler = torch.amp.GradScaler("cuda", enabled=amp)
     criterion = make_loss(args.loss)
+    if getattr(args, "init", None) and ckpt is None:
+        load_init_weights(args.init, bare, args)
     state = restore(ckpt, bare, opt, sched, scaler, amp, weights_only=args.test_only)
     run = Run(args=args, out=out, device=device, amp=amp, main_proc=main_proc, world=world, cfg=train_ds.cfg,
               model=model, bare=bare, optimizer=opt, lr_scheduler=sched, scaler=scaler, criterion=criterion,

@@ -1,0 +1,120 @@
+"""sim2real rows with site adaptation and fine-tuning, the label-efficiency curve, --init."""
+import csv
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import torch
+from synthetic_shards import write_shards
+
+from trainer.augment import SampleConfig
+from trainer.checkpoint import load_checkpoint
+from trainer.cli import main
+from trainer.site_adapt import SiteAdaptation
+from trainer.sources import RealFolder, ShardSource, split_fraction
+from trainer.stream import SegStream
+
+
+def _real_folder(root: Path, n: int = 12) -> Path:
+    (root / "images").mkdir(parents=True)
+    (root / "masks").mkdir()
+    rng = np.random.default_rng(0)
+    for i in range(n):
+        img = (rng.random((48, 64, 3)) * 60 + 100).astype(np.uint8)
+        m = np.zeros((48, 64), np.uint8)
+        r = int(rng.integers(5, 40))
+        m[r:r + 3, 4:60] = 255
+        img[m > 0] = 20
+        cv2.imwrite(str(root / f"images/{i:03d}.png"), img)
+        cv2.imwrite(str(root / f"masks/{i:03d}.png"), m)
+    return root
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    base = tmp_path_factory.mktemp("sim2real")
+    return {"real": _real_folder(base / "real"), "shards": write_shards(base / "shards", per_shard=4)}
+
+
+COMMON = ["--arch", "unet", "--batch-size", "2", "--crop", "32", "--workers", "0", "--no-progress"]
+
+
+def test_rows_with_adaptation_and_finetune(data, tmp_path, capsys):
+    out = tmp_path / "s2r"
+    rc = main(["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]),
+               "--real-test-fraction", "0.25", "--target", "--max-steps", "4",
+               "--runs", "synthetic,synthetic+fourier,synthetic+adapt,real,finetune", "--out", str(out), *COMMON])
+    assert rc == 0
+    table = json.loads((out / "sim2real.json").read_text())
+    assert list(table["runs"]) == ["synthetic", "synthetic+fourier", "synthetic+adapt", "real", "finetune"]
+    # the target is the 9 training images of the 12 (3 held out for the test), never the test photos
+    assert table["target"].endswith(": 9 photos") and table["real_test_images"] == 3
+    ft = table["runs"]["finetune"]
+    assert ft["pretrain_steps"] == 2 and ft["steps"] == 4 and ft["pretrain_adapted"] is True
+    for r in table["runs"].values():
+        assert 0.0 <= r["best"]["f1"] <= 1.0
+    # the fine-tuned model started from the pretrained one and trained 2 more steps on real photos
+    assert load_checkpoint(out / "finetune" / "checkpoint.pt")["step"] == 2
+    assert "| synthetic+fourier |" in capsys.readouterr().out
+
+
+def test_adaptation_rows_need_a_target(data, tmp_path, capsys):
+    rc = main(["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]),
+               "--real-test-fraction", "0.25", "--runs", "synthetic+fourier", "--out", str(tmp_path), *COMMON])
+    assert rc == 2 and "needs --target" in capsys.readouterr().err
+    rc = main(["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]),
+               "--real-test-fraction", "0.25", "--target", str(tmp_path / "nope"), "--out", str(tmp_path), *COMMON])
+    assert rc == 2 and "no such folder" in capsys.readouterr().err
+
+
+def test_curve_writes_csv_plot_and_headline(data, tmp_path):
+    out = tmp_path / "c"
+    rc = main(["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]),
+               "--real-test-fraction", "0.25", "--curve", "0,2,4", "--repeats", "2", "--curve-steps", "2",
+               "--pretrain-steps", "2", "--out", str(out), *COMMON])
+    assert rc == 0
+    rows = list(csv.DictReader(open(out / "curve" / "curve.csv")))
+    # per repeat: finetune at N=0 (the pretrained model as it is) + both arms at N=2 and N=4
+    assert len(rows) == 2 * 5
+    assert {(r["arm"], r["n"]) for r in rows} == {("finetune", "0"), ("real", "2"), ("finetune", "2"),
+                                                  ("real", "4"), ("finetune", "4")}
+    assert all(r["steps"] == ("0" if r["n"] == "0" else "2") for r in rows)
+    assert (out / "curve" / "curve.png").stat().st_size > 0
+    assert "no fine-tune point at N = 30" in (out / "curve" / "curve.md").read_text()
+
+
+def test_init_loads_weights_and_refuses_another_arch(data, tmp_path, capsys):
+    base = ["seg", "--real", str(data["real"]), "--batch-size", "2", "--crop", "32", "--workers", "0",
+            "--no-progress", "--max-steps", "2"]
+    assert main([*base, "--arch", "unet", "--out", str(tmp_path / "a")]) == 0
+    # lr 0: one step from --init leaves the weights exactly as loaded
+    assert main([*base, "--arch", "unet", "--lr", "0", "--init", str(tmp_path / "a/checkpoint.pt"),
+                 "--out", str(tmp_path / "b")]) == 0
+    a = load_checkpoint(tmp_path / "a/checkpoint.pt")["model"]
+    b = load_checkpoint(tmp_path / "b/checkpoint.pt")["model"]
+    assert all(torch.equal(a[k], b[k]) for k in a if a[k].dtype.is_floating_point and "running" not in k)
+    assert main([*base, "--arch", "lraspp_mobilenet_v3_large", "--init", str(tmp_path / "a/checkpoint.pt"),
+                 "--out", str(tmp_path / "c")]) == 2
+    assert "checkpoint is a unet" in capsys.readouterr().err
+
+
+def test_stream_adapts_synthetic_rgb_only(data):
+    photos = sorted((data["real"] / "images").glob("*.png"))
+    dark = tuple(str(p) for p in photos)
+    cfg = SampleConfig(channels="rgb", crop=None, rotate_deg=0.0, jitter=0.0)
+    syn = ShardSource(data["shards"], "none")
+    real = RealFolder(data["real"], stems=split_fraction([p.stem for p in photos], 0.5, 0)[0])
+
+    def batches(adapt):
+        ds = SegStream(cfg, syn, real, batch_size=1, train=True, seed=3, adapt=adapt, shuffle_buffer=1)
+        return {s["key"]: s for s in ds}
+
+    plain = batches(None)
+    adapted = batches(SiteAdaptation(dark, ("reinhard",)))
+    assert plain.keys() == adapted.keys()
+    for k in plain:
+        assert torch.equal(plain[k]["mask"], adapted[k]["mask"])
+        same = torch.equal(plain[k]["image"], adapted[k]["image"])
+        assert same == (k in real.keys), k  # real photos untouched, every synthetic one changed
