@@ -10,65 +10,36 @@ Only the driver process writes the manifest (workers return ``ShardInfo``); each
 save replaces the whole file atomically (temp + ``os.replace`` locally, one whole
 object on fsspec stores), so a reader never sees half a manifest.
 
-Locations are local paths or fsspec URLs (``s3://bucket/prefix``, ``memory://x``);
-``storage_options`` go to fsspec unchanged (e.g. ``client_kwargs`` for S3).
+This module also owns shard file names (``shard-000123.tar``) and the library
+versions recorded with a dataset. Files are read and written through
+``crackgen.shards.storage``, so the root may be a local dir or an fsspec URL.
 """
 from __future__ import annotations
 
 import dataclasses
 import datetime as _dt
-import hashlib
 import json
 import os
 import platform
 import re
-import tempfile
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping
 
 from crackgen.errors import CrackgenError
+from crackgen.shards.storage import file_size, join, read_bytes, sha256_file, write_bytes_atomic
 
 MANIFEST_NAME = "manifest.json"
 MANIFEST_FORMAT = "crackgen-shards"
 MANIFEST_VERSION = 1
 SHARD_PATTERN = "shard-%06d.tar"
 _SHARD_RE = re.compile(r"^shard-(\d{6,})\.tar$")
-_CHUNK = 1 << 20
 
 
 class ManifestError(CrackgenError, ValueError):
     """A manifest that is missing, unreadable or inconsistent (message names the file)."""
 
 
-# ---------------------------------------------------------------- locations
-
-def is_url(path: str | os.PathLike) -> bool:
-    """True for fsspec URLs other than ``file://`` (those are treated as local paths)."""
-    s = os.fspath(path)
-    return "://" in s and not s.startswith("file://")
-
-
-def local_path(path: str | os.PathLike) -> str:
-    s = os.fspath(path)
-    return s[len("file://"):] if s.startswith("file://") else s
-
-
-def get_fs(url: str, storage_options: Mapping[str, Any] | None = None):
-    """(filesystem, path-inside-it) for an fsspec URL; fsspec is imported only here."""
-    import fsspec
-
-    try:
-        return fsspec.core.url_to_fs(url, **dict(storage_options or {}))
-    except (ImportError, ValueError) as exc:
-        raise ManifestError(f"{url}: cannot open storage: {exc}") from None
-
-
-def join(root: str, name: str) -> str:
-    """Join a file name onto a local dir or a URL."""
-    if is_url(root):
-        return root.rstrip("/") + "/" + name
-    return os.path.join(local_path(root), name)
-
+# ---------------------------------------------------------------- shard names
 
 def shard_name(index: int) -> str:
     if index < 0:
@@ -80,80 +51,6 @@ def shard_index(name: str) -> int | None:
     """Index from ``shard-000123.tar`` (any directory/URL prefix), else None."""
     m = _SHARD_RE.match(name.rstrip("/").rsplit("/", 1)[-1].rsplit(os.sep, 1)[-1])
     return int(m.group(1)) if m else None
-
-
-def file_size(path: str, storage_options: Mapping[str, Any] | None = None) -> int | None:
-    """Size in bytes, or None when the file is missing."""
-    if is_url(path):
-        fs, p = get_fs(path, storage_options)
-        try:
-            return int(fs.size(p))
-        except FileNotFoundError:
-            return None
-    try:
-        return os.path.getsize(local_path(path))
-    except FileNotFoundError:
-        return None
-
-
-def sha256_file(path: str, storage_options: Mapping[str, Any] | None = None) -> str:
-    """sha256 of a whole file (local or fsspec), read in 1 MiB chunks."""
-    h = hashlib.sha256()
-    if is_url(path):
-        fs, p = get_fs(path, storage_options)
-        f = fs.open(p, "rb")
-    else:
-        f = open(local_path(path), "rb")
-    with f:
-        while chunk := f.read(_CHUNK):
-            h.update(chunk)
-    return h.hexdigest()
-
-
-def read_bytes(path: str, storage_options: Mapping[str, Any] | None = None) -> bytes:
-    if is_url(path):
-        fs, p = get_fs(path, storage_options)
-        return fs.cat_file(p)
-    with open(local_path(path), "rb") as f:
-        return f.read()
-
-
-def write_bytes_atomic(path: str, data: bytes, storage_options: Mapping[str, Any] | None = None) -> None:
-    """Replace ``path`` with ``data`` so readers see the old or the new file, never half."""
-    if is_url(path):
-        fs, p = get_fs(path, storage_options)
-        fs.pipe_file(p, data)  # one PUT: object stores swap whole objects
-        return
-    p = local_path(path)
-    d = os.path.dirname(os.path.abspath(p))
-    os.makedirs(d, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=d, prefix=os.path.basename(p) + ".", suffix=".partial")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, p)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
-    fsync_dir(d)
-
-
-def fsync_dir(d: str) -> None:
-    """Make a rename durable (POSIX); silently skipped where directories cannot be opened."""
-    try:
-        fd = os.open(d, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
 
 
 def library_versions(extra: Mapping[str, str] | None = None) -> dict[str, str]:
