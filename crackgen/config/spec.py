@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from crackgen.config.recipe import Recipe
+from crackgen.config.recipe import AdaptSection, Recipe
 
 # 2: one random stream per section (SECTION_STREAMS) instead of one shared stream.
 SPEC_VERSION = 2
@@ -447,9 +447,10 @@ def _lidar(recipe: Recipe, rng: np.random.Generator) -> LidarSpec:
     )
 
 
-def _adapt(recipe: Recipe, rng: np.random.Generator) -> AdaptSpec:
-    """Every draw is made even when adaptation is off or skipped, so toggling it moves nothing."""
-    a = recipe.adapt
+def draw_adapt(a: AdaptSection, rng: np.random.Generator) -> AdaptSpec:
+    """Every draw is made even when adaptation is off or skipped, so toggling it moves nothing.
+
+    Public because ``crackgen adapt`` draws for already-rendered samples the same way."""
     applied = bool(rng.random() < a.probability)
     method, band, fraction = str(a.method.draw(rng)), float(a.band.draw(rng)), float(rng.random())
     if not (a.enabled and applied):
@@ -489,5 +490,5 @@ def make_spec(recipe: Recipe, index: int) -> SampleSpec:
         tof=_tof(recipe, rng("tof")),
         lidar=_lidar(recipe, rng("lidar")),
         stereo=stereo,
-        adapt=_adapt(recipe, rng("adapt")),
+        adapt=draw_adapt(recipe.adapt, rng("adapt")),
     )

@@ -21,6 +21,7 @@ from crackgen.config.recipe import Recipe
 from crackgen.datagen.backends import BACKENDS, Job, worker_versions
 from crackgen.datagen.tasks import ShardResult, ShardTask
 from crackgen.errors import CrackgenError
+from crackgen.postrender.targets import TargetError, TargetPhotos
 from crackgen.shards import clean_partials
 from crackgen.shards.manifest import Manifest, ManifestError, ShardInfo, shard_index
 from crackgen.shards.storage import get_fs, is_url, local_path
@@ -195,6 +196,15 @@ class GenerateOptions:
     progress: bool = True
 
 
+def check_inputs(recipe: Recipe) -> None:
+    """Files the recipe points to, checked before any rendering: the [adapt] target photos."""
+    if recipe.adapt.enabled:
+        try:
+            TargetPhotos(recipe.adapt.target)
+        except TargetError as exc:
+            raise GenerateError(str(exc)) from None
+
+
 def generate(recipe: Recipe, opts: GenerateOptions, log: Callable[[str], None] | None = None) -> Summary:
     """Make (or finish) the dataset of ``recipe`` in ``opts.out``; returns the run summary."""
     log = log or (lambda s: print(s, file=sys.stderr))
@@ -204,6 +214,7 @@ def generate(recipe: Recipe, opts: GenerateOptions, log: Callable[[str], None] |
     if opts.workers < 1:
         raise GenerateError(f"--workers must be >= 1, got {opts.workers}")
     recipe = effective_recipe(recipe, opts.samples)
+    check_inputs(recipe)
     manifest, todo, notes = prepare_output(recipe, opts.out, opts.resume, opts.storage_options,
                                            versions=worker_versions())
     summary = Summary(out=opts.out, skipped_shards=recipe.num_shards - len(todo), redone=notes)

@@ -30,6 +30,8 @@ import crackgen
 from crackgen.config.recipe import Recipe
 from crackgen.config.spec import SampleSpec, make_spec
 from crackgen.errors import CrackgenError
+from crackgen.postrender.stage import adapt_members
+from crackgen.postrender.targets import TargetPhotos
 from crackgen.procedural.crackmap import crack_map
 from crackgen.procedural.materials import material_maps
 from crackgen.procedural.shadow_pattern import shadow_alpha
@@ -43,7 +45,7 @@ from crackgen.sim.sensors.stereo import simulate_stereo
 from crackgen.sim.sensors.tof import albedo_from_map, simulate_tof
 
 STAGES = ("spec", "crackmap", "surface", "materials", "shadow", "scene_update", "render",
-          "raycast", "groundtruth", "tof", "lidar", "stereo")
+          "raycast", "groundtruth", "tof", "lidar", "stereo", "adapt")
 SHADOW_PX = 256  # occluder alpha resolution (px per side)
 
 
@@ -96,6 +98,14 @@ class SampleProducer:
         self.recipe = recipe
         self.threads = int(threads)
         self._scene = None
+        self._targets: TargetPhotos | None = None
+
+    @property
+    def targets(self) -> TargetPhotos | None:
+        """The [adapt] target photos, listed once per worker (the driver checked them before rendering)."""
+        if self._targets is None and self.recipe.adapt.enabled:
+            self._targets = TargetPhotos(self.recipe.adapt.target, check=False)
+        return self._targets
 
     # ---- Blender (lazy: bpy is imported by the first render only)
     @property
@@ -186,6 +196,9 @@ class SampleProducer:
                 members["disp_tof.exr"] = st.disp_tof
                 members["tofamp.exr"] = st.tof_amplitude
             sensors["stereo"] = {"fill_sgm": fill_ratio(st.disp_sgm), "fill_gt": fill_ratio(st.disp_gt)}
+        # post-render image stages: RGB views only, after every sensor has read the clean render
+        with tm.stage("adapt"):
+            members, adapt_meta = adapt_members(spec.adapt, members, self.targets if spec.adapt.enabled else None)
 
         valid = (gt.depth > 0) & (out.depth > 0)
         render_vs_raycast = float(np.median(np.abs(out.depth[valid] - gt.depth[valid]))) if valid.any() else None
@@ -217,6 +230,7 @@ class SampleProducer:
                 "render_vs_raycast_median_abs_m": render_vs_raycast,
             },
             "sensors": sensors,
+            "adapt": adapt_meta,
             "render": {"device": scene_meta.get("device"), "lights": scene_meta.get("lights")},
             "recipe_hash": self.recipe.hash,
             "versions": {"crackgen": crackgen.__version__, "spec": spec.version, **_blender_version()},

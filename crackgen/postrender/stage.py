@@ -1,0 +1,37 @@
+"""The [adapt] post-render stage: apply a sample's drawn ``AdaptSpec`` to its RGB views.
+
+Why a separate module: the generator's pipeline and ``crackgen adapt`` (re-adapting
+shards that are already rendered) run the very same step, so a dataset adapted later
+matches one adapted while rendering. Only the RGB views change; the metadata records
+the method, its parameters and the target photo's file name.
+"""
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+import numpy as np
+
+from crackgen.config.spec import AdaptSpec
+from crackgen.postrender.adapt import adapt_views
+from crackgen.postrender.targets import TargetPhotos
+from crackgen.shards.members import RGB_MEMBERS
+
+
+def adapt_members(spec: AdaptSpec, members: Mapping[str, Any],
+                  targets: TargetPhotos | None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(members with adapted RGB views, metadata). ``members`` maps ``rgb.png``-style names to arrays."""
+    if not spec.enabled:
+        return dict(members), {"applied": False}
+    if targets is None:
+        raise ValueError("adapt: the sample asks for adaptation but no target photo folder is loaded")
+    names = [f"{m}.png" for m in RGB_MEMBERS if f"{m}.png" in members]  # left view first
+    name = targets.name_for(spec.target_fraction)
+    target = targets.load(name)
+    views = adapt_views([np.asarray(members[n]) for n in names], target, spec.method, spec.band)
+    out = dict(members)
+    out.update(zip(names, views))
+    meta = {"applied": True, "method": spec.method, "target": name, "target_folder": spec.target,
+            "views": [n.split(".")[0] for n in names]}
+    if spec.method == "fourier":
+        meta["band"] = spec.band
+    return out, meta
