@@ -1,4 +1,4 @@
-"""`crackgen` command line: generate, validate, inspect, bench, show, verify, export.
+"""`crackgen` command line: generate, validate, inspect, bench, show, verify, export, adapt.
 
 Each subcommand imports its heavy modules lazily so `crackgen --help` and
 `crackgen validate` stay fast. Bad input exits 1 with one line per problem; a run
@@ -134,6 +134,19 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_adapt(args: argparse.Namespace) -> int:
+    from crackgen.datagen.adapt_shards import AdaptShardsError, adapt_dataset, adapt_section
+
+    try:
+        section = adapt_section(args.target, args.method, args.weights, args.band, args.probability)
+        summary = adapt_dataset(args.shards, args.out, section, seed=args.seed, resume=args.resume,
+                                progress=not args.no_progress)
+    except AdaptShardsError as exc:
+        return _err(str(exc))
+    print("\n".join(summary.lines()))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     from crackgen.datagen.backends import BACKENDS  # the --backend choices (registry keys)
 
@@ -193,6 +206,20 @@ def build_parser() -> argparse.ArgumentParser:
                    help="png16: 16-bit PNG in mm, 0 = none; exr: float32 metres, -1 = none")
     e.add_argument("--no-progress", action="store_true", help="no progress bar")
     e.set_defaults(func=_cmd_export)
+
+    a = sub.add_parser("adapt", help="adapt the RGB views of rendered shards toward unlabeled photos (new shards)")
+    a.add_argument("shards", help="source dataset directory (a finished crackgen dataset)")
+    a.add_argument("--target", required=True, help="folder of unlabeled target photos")
+    a.add_argument("--out", required=True, help="new dataset directory")
+    a.add_argument("--method", default="fourier,reinhard,histogram",
+                   help="fourier, reinhard and/or histogram; several: one drawn per sample")
+    a.add_argument("--weights", default=None, help="draw weights of --method (default: equal)")
+    a.add_argument("--band", default="0.005,0.05", help="fourier band MIN,MAX (fraction of min(H, W))")
+    a.add_argument("--probability", type=float, default=1.0, help="chance that a sample is adapted")
+    a.add_argument("--seed", type=int, default=None, help="seed of the draws (default: the source recipe's)")
+    a.add_argument("--resume", action="store_true", help="keep verified output shards, redo the rest")
+    a.add_argument("--no-progress", action="store_true", help="no progress bar")
+    a.set_defaults(func=_cmd_adapt)
     return p
 
 
