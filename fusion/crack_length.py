@@ -276,7 +276,6 @@ def crack_components(
     d2, pred, _ = _sweep_all(g.graph, a)
     b = _group_argmax(d2, labels, n_comp)
 
-    degree = np.diff(g.graph.indptr)
     out: list[CrackComponent] = []
     for k in range(n_comp):
         exact = True

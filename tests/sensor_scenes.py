@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from crackgen.config.spec import LidarSpec, TofSpec
 from crackgen.sim.raycast import MeshRaycaster
 from crackgen.sim.rig import Rig
-from crackgen.config.spec import LidarSpec, TofSpec
 from fusion.camera import Camera, intrinsics_from_fov, look_at, mounted_pose
 
 

@@ -13,13 +13,13 @@ import time
 import numpy as np
 
 from crackgen.blender.scene import LiveScene
+from crackgen.config.recipe import Recipe
+from crackgen.config.spec import make_spec
 from crackgen.procedural.crackmap import crack_map
 from crackgen.procedural.materials import material_maps
-from crackgen.config.recipe import Recipe
-from crackgen.sim.rig import make_rig
 from crackgen.procedural.shadow_pattern import shadow_alpha
-from crackgen.config.spec import make_spec
 from crackgen.procedural.surface import surface_vertices
+from crackgen.sim.rig import make_rig
 
 
 def bench_live_scene(recipe: Recipe, samples: int = 5, distinct: int = 2, shadow_px: int = 256) -> dict:

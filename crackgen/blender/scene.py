@@ -15,12 +15,19 @@ import numpy as np
 
 from crackgen.blender.camera import apply_camera
 from crackgen.blender.lights import LightPool, Sky
-from crackgen.blender.render import RenderSettings, Renderer, apply_settings, configure_scene, linear_to_srgb8, select_device
+from crackgen.blender.render import (
+    Renderer,
+    RenderSettings,
+    apply_settings,
+    configure_scene,
+    linear_to_srgb8,
+    select_device,
+)
 from crackgen.blender.shadow import ShadowOccluder
 from crackgen.blender.surface import LiveSurface, MapsLike
+from crackgen.config.spec import SampleSpec
 from crackgen.errors import CrackgenError
 from crackgen.sim.rig import Rig
-from crackgen.config.spec import SampleSpec
 
 
 class SceneUpdateError(CrackgenError, ValueError):

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from crackgen.config.spec import CrackSpec
 from crackgen.errors import CrackgenError
 from crackgen.procedural.noise import fbm
-from crackgen.config.spec import CrackSpec
 from fusion.crack_length import crack_length, skeleton
 
 __all__ = ["CrackMapError", "CrackMap", "crack_map", "texel_centres", "mask_at_uv", "nearest_texel", "depth_at_uv"]

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 import re
+import sys
 import tomllib
 from dataclasses import dataclass
 from functools import lru_cache
@@ -28,9 +28,9 @@ import numpy as np
 from numba import njit, prange
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from crackgen.config.spec import MaterialSpec
 from crackgen.errors import CrackgenError
 from crackgen.procedural.distractors import DISTRACTORS, paint_distractor
-from crackgen.config.spec import MaterialSpec
 from crackgen.procedural.texgrid import TexGrid, clip01, quantile_fast, smoothstep
 
 ASSETS_ENV = "CRACKGEN_ASSETS"

@@ -20,9 +20,9 @@ import math
 import cv2
 import numpy as np
 
+from crackgen.config.spec import ShadowSpec
 from crackgen.errors import CrackgenError
 from crackgen.procedural.noise import fbm
-from crackgen.config.spec import ShadowSpec
 
 PATTERNS = ("noise", "shapes", "stripes")
 MAX_SHAPES = 400

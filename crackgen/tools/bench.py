@@ -36,9 +36,9 @@ def bench(recipe: Recipe, samples: int = 5, threads: int = 0, progress: bool = T
     """Median per-stage seconds over ``samples`` samples after one warm-up sample."""
     from tqdm import tqdm
 
-    from crackgen.shards.codecs import encode_member
     from crackgen.datagen.pipeline import SampleProducer
     from crackgen.shards import ShardWriter, sample_key
+    from crackgen.shards.codecs import encode_member
 
     threads = threads or recipe.render.threads or (os.cpu_count() or 1)
     producer = SampleProducer(recipe, threads=threads)

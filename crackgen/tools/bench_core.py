@@ -29,9 +29,9 @@ def bench_core(px: int = 1024, grid: int = 384, octaves: int = 6, repeat: int = 
     """Median seconds per stage for sample ``index`` of the default recipe (octaves forced)."""
     import dataclasses
 
-    from crackgen.procedural.crackmap import crack_map
     from crackgen.config.recipe import Recipe
     from crackgen.config.spec import make_spec
+    from crackgen.procedural.crackmap import crack_map
     from crackgen.procedural.surface import surface_mesh, surface_vertices
     from fusion.crack_length import crack_length, skeleton
 

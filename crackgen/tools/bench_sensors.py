@@ -17,17 +17,17 @@ import numpy as np
 
 
 def bench(samples: int = 3, grid_px: int | None = None) -> dict[str, float]:
-    from crackgen.procedural.crackmap import crack_map
-    from crackgen.sim.groundtruth import view_ground_truth
-    from crackgen.procedural.materials import material_maps
-    from crackgen.sim.raycast import MeshRaycaster
     from crackgen.config.recipe import Recipe
+    from crackgen.config.spec import make_spec
+    from crackgen.procedural.crackmap import crack_map
+    from crackgen.procedural.materials import material_maps
+    from crackgen.procedural.surface import surface_faces, surface_uvs, surface_vertices
+    from crackgen.sim.groundtruth import view_ground_truth
+    from crackgen.sim.raycast import MeshRaycaster
     from crackgen.sim.rig import make_rig
     from crackgen.sim.sensors import sensor_rng
     from crackgen.sim.sensors.lidar import simulate_lidar
     from crackgen.sim.sensors.tof import albedo_from_map, simulate_tof
-    from crackgen.config.spec import make_spec
-    from crackgen.procedural.surface import surface_faces, surface_uvs, surface_vertices
 
     recipe = Recipe()
     rows: dict[str, list[float]] = {k: [] for k in ("bvh_build", "groundtruth", "tof", "lidar", "sensors_total")}

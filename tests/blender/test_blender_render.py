@@ -17,15 +17,15 @@ bpy = pytest.importorskip("bpy")
 
 from crackgen.blender.scene import LiveScene, SceneUpdateError  # noqa: E402
 from crackgen.blender.surface import SurfaceUpdateError  # noqa: E402
-from crackgen.procedural.crackmap import crack_map  # noqa: E402
-from crackgen.sim.groundtruth import view_ground_truth  # noqa: E402
-from crackgen.procedural.materials import material_maps  # noqa: E402
-from crackgen.sim.raycast import MeshRaycaster  # noqa: E402
 from crackgen.config.recipe import Recipe  # noqa: E402
-from crackgen.sim.rig import make_rig  # noqa: E402
-from crackgen.procedural.shadow_pattern import shadow_alpha  # noqa: E402
 from crackgen.config.spec import LightSpec, make_spec  # noqa: E402
+from crackgen.procedural.crackmap import crack_map  # noqa: E402
+from crackgen.procedural.materials import material_maps  # noqa: E402
+from crackgen.procedural.shadow_pattern import shadow_alpha  # noqa: E402
 from crackgen.procedural.surface import surface_faces, surface_uvs, surface_vertices  # noqa: E402
+from crackgen.sim.groundtruth import view_ground_truth  # noqa: E402
+from crackgen.sim.raycast import MeshRaycaster  # noqa: E402
+from crackgen.sim.rig import make_rig  # noqa: E402
 
 pytestmark = pytest.mark.blender
 

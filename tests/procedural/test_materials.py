@@ -6,6 +6,8 @@ import dataclasses
 import numpy as np
 import pytest
 
+from crackgen.config.recipe import Recipe
+from crackgen.config.spec import DistractorSpec, MaterialSpec, make_spec
 from crackgen.procedural.crackmap import crack_map
 from crackgen.procedural.materials import (
     Family,
@@ -19,8 +21,6 @@ from crackgen.procedural.materials import (
     resample_crack,
     save_preview,
 )
-from crackgen.config.recipe import Recipe
-from crackgen.config.spec import DistractorSpec, MaterialSpec, make_spec
 from crackgen.procedural.texgrid import TexGrid
 
 FAMILIES = ["asphalt", "concrete", "masonry", "steel"]

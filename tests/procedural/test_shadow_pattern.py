@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from crackgen.procedural.shadow_pattern import PATTERNS, ShadowPatternError, shadow_alpha
 from crackgen.config.spec import ShadowSpec
+from crackgen.procedural.shadow_pattern import PATTERNS, ShadowPatternError, shadow_alpha
 
 
 def spec(**kw) -> ShadowSpec:

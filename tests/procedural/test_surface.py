@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from crackgen.procedural.crackmap import crack_map
 from crackgen.config.spec import CrackSpec
+from crackgen.procedural.crackmap import crack_map
 from crackgen.procedural.surface import (
     SurfaceError,
     export_mesh,

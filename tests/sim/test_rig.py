@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from crackgen.config.recipe import Recipe
-from crackgen.sim.rig import make_rig
 from crackgen.config.spec import make_spec
+from crackgen.sim.rig import make_rig
 from fusion.camera import Camera, invert_pose
 
 

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 from sensor_scenes import make_test_rig, merge, plane_mesh, tilted_camera, tof_spec
 
+from crackgen.config.spec import StereoSpec
 from crackgen.sim.groundtruth import view_ground_truth
 from crackgen.sim.sensors import sensor_rng
 from crackgen.sim.sensors.stereo import SYNTH3_CHANNELS, simulate_stereo
 from crackgen.sim.sensors.tof import SensorError, constant_albedo, simulate_tof
-from crackgen.config.spec import StereoSpec
 from fusion.disparity import depth_to_disparity
 from fusion.stereo import StereoInputError, left_right_difference, sgbm_disparity
 

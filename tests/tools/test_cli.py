@@ -55,8 +55,8 @@ def test_generate_refuses_non_empty_dir_without_resume(tmp_path, capsys):
 
 
 def test_resume_refuses_foreign_dir_and_other_recipe(tmp_path, capsys):
-    from crackgen.shards.manifest import Manifest
     from crackgen.config.recipe import load_recipe
+    from crackgen.shards.manifest import Manifest
 
     out = tmp_path / "foreign"
     out.mkdir()

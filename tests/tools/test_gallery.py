@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tiny_recipes import tiny_recipe
 
 from crackgen.tools.gallery import colorize_depth, contact_sheet, write_gallery
-from tiny_recipes import tiny_recipe
 
 CHROMIUM = "/usr/bin/chromium"
 RECIPE = tiny_recipe(5, near_camera=False, stereo=True)
@@ -20,8 +20,8 @@ RECIPE = tiny_recipe(5, near_camera=False, stereo=True)
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):
     pytest.importorskip("bpy")
-    from crackgen.datagen.pipeline import SampleProducer
     from crackgen.config.recipe import parse_recipe
+    from crackgen.datagen.pipeline import SampleProducer
     from crackgen.shards import ShardWriter, sample_key
 
     root = tmp_path_factory.mktemp("insp") / "ds"

@@ -1,8 +1,8 @@
 """README stays true: set-up commands, generated recipe reference, CLI subcommands."""
 from pathlib import Path
 
-from crackgen.tools.cli import build_parser
 from crackgen.config.recipe_doc import reference_markdown
+from crackgen.tools.cli import build_parser
 
 README = (Path(__file__).resolve().parents[2] / "README.md").read_text()
 

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from tiny_recipes import tiny_recipe
 
 from crackgen.tools.show import ShowError, sample_cloud, show, splat_render
-from tiny_recipes import tiny_recipe
 
 RECIPE = tiny_recipe(9, near_camera=False, lidar=False)
 
@@ -13,8 +13,8 @@ RECIPE = tiny_recipe(9, near_camera=False, lidar=False)
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):
     pytest.importorskip("bpy")
-    from crackgen.datagen.pipeline import SampleProducer
     from crackgen.config.recipe import parse_recipe
+    from crackgen.datagen.pipeline import SampleProducer
     from crackgen.shards import ShardWriter, sample_key
 
     root = tmp_path_factory.mktemp("show") / "ds"

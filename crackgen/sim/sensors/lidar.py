@@ -18,10 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from crackgen.config.spec import LidarSpec
 from crackgen.sim.raycast import MeshRaycaster
 from crackgen.sim.rig import Rig
 from crackgen.sim.sensors.tof import SensorError
-from crackgen.config.spec import LidarSpec
 from fusion.camera import invert_pose
 from fusion.projection import project_points
 

@@ -13,9 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from crackgen.config.spec import StereoSpec
 from crackgen.sim.rig import Rig
 from crackgen.sim.sensors.tof import SensorError, TofResult
-from crackgen.config.spec import StereoSpec
 from fusion.disparity import depth_to_disparity
 from fusion.stereo import left_right_difference, reproject_as_disparity, sgbm_disparity
 
