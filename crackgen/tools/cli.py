@@ -35,10 +35,15 @@ def _load(path: str):
 
 def _cmd_validate(args: argparse.Namespace) -> int:
     from crackgen.config.recipe import summary
+    from crackgen.datagen.generate import GenerateError, check_inputs
 
     recipe = _load(args.recipe)
     if recipe is None:
         return EXIT_BAD_INPUT
+    try:
+        check_inputs(recipe)  # files the recipe points to, e.g. the [adapt] target photos
+    except GenerateError as exc:
+        return _err(str(exc))
     print(f"{args.recipe}: OK")
     print(summary(recipe))
     return 0

@@ -71,3 +71,14 @@ def test_bad_target_folder_is_refused_before_rendering(tmp_path, make):
     with pytest.raises(GenerateError, match="adapt target"):
         generate(_recipe(str(target)), GenerateOptions(out=str(out), progress=False))
     assert not out.exists()  # nothing made, nothing lost
+
+
+def test_validate_names_a_bad_target_folder(tmp_path, capsys):
+    from crackgen.tools.cli import main
+
+    recipe = tmp_path / "r.toml"
+    recipe.write_text(f'[adapt]\ntarget = "{tmp_path / "photos"}"\n')
+    assert main(["validate", str(recipe)]) == 1
+    assert "no such folder" in capsys.readouterr().err
+    _photos(tmp_path / "photos")
+    assert main(["validate", str(recipe)]) == 0
