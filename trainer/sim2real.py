@@ -199,16 +199,17 @@ def run_sim2real(args: argparse.Namespace) -> dict[str, Any]:
     targets = adaptation_targets(args, train_stems) if any(r in ADAPT_RUNS or r == "finetune" for r in runs) else None
     device = _device(args)
     results: dict[str, Any] = {}
-    for i, name in enumerate(runs, 1):
-        log.info("sim2real: row %d/%d '%s'", i, len(runs), name)
-        results[name] = run_row(name, args, out, train_stems, targets, test, device)
     n_real = len(train_stems) if train_stems is not None else len(real_folder(args, args.real))
     table = {"arch": args.arch, "channels": sample_config_from_args(args).channels, "max_steps": args.max_steps,
              "batch_size": args.batch_size, "crop": args.crop, "seed": args.seed, "real_train": args.real,
              "real_train_images": n_real, "real_test": test_root, "real_test_images": len(test),
              "synthetic": args.synthetic, "target": describe_target(args, targets), "runs": results}
-    (out / "sim2real.json").write_text(json.dumps(table, indent=2))
-    (out / "sim2real.md").write_text("\n".join(rows_markdown(args, table, test_root, len(test))) + "\n")
+    for i, name in enumerate(runs, 1):
+        log.info("sim2real: row %d/%d '%s'", i, len(runs), name)
+        results[name] = run_row(name, args, out, train_stems, targets, test, device)
+        # after every row, so an interrupted comparison keeps the rows it finished
+        (out / "sim2real.json").write_text(json.dumps(table, indent=2))
+        (out / "sim2real.md").write_text("\n".join(rows_markdown(args, table, test_root, len(test))) + "\n")
     return table
 
 
