@@ -139,6 +139,14 @@ class _Entry:
     params: dict[str, Any]
 
 
+def _adapt_label(a: dict[str, Any]) -> str:
+    """``fourier 0.031 <- site_12.jpg`` for an adapted sample, ``none`` otherwise."""
+    if not a.get("applied"):
+        return "none"
+    band = f" {a['band']:.3f}" if "band" in a else ""
+    return f"{a.get('method')}{band} <- {a.get('target')}"
+
+
 def _params(meta: dict[str, Any], sample: dict[str, Any]) -> dict[str, Any]:
     spec = meta.get("spec", {})
     cam = spec.get("camera", {})
@@ -154,6 +162,7 @@ def _params(meta: dict[str, Any], sample: dict[str, Any]) -> dict[str, Any]:
         "focal_mm": cam.get("focal_mm"),
         "crack_len_m": crack.get("length_m"),
         "crack_px_frac": crack.get("pixel_fraction"),
+        "adapt": _adapt_label(meta.get("adapt") or {}),
     }
     if "mask" in sample and p["crack_px_frac"] is None:
         p["crack_px_frac"] = float((sample["mask"] > 127).mean())
@@ -251,10 +260,12 @@ def _summary_html(entries: list[_Entry]) -> str:
     def col(k: str) -> list[float]:
         return [p[k] for p in P if isinstance(p.get(k), (int, float))]
 
-    def counts(k: str, split: bool = False) -> dict[str, int]:
+    def counts(k: str, split: bool = False, method_only: bool = False) -> dict[str, int]:
         out: dict[str, int] = {}
         for p in P:
             vals = str(p.get(k)).split(",") if split else [str(p.get(k))]
+            if method_only:
+                vals = [v.split(" ", 1)[0] for v in vals]
             for v in vals:
                 out[v] = out.get(v, 0) + 1
         return out
@@ -269,6 +280,7 @@ def _summary_html(entries: list[_Entry]) -> str:
         svg_counts(counts("family"), "material family"),
         svg_counts(counts("lights", split=True), "light kinds"),
         svg_counts(counts("shadow"), "shadow pattern"),
+        svg_counts(counts("adapt", method_only=True), "site adaptation method"),
     ]
     return "".join(charts)
 

@@ -109,3 +109,14 @@ def test_gallery_loads_in_headless_chromium(dataset, tmp_path):
     console = [l for l in res.stderr.splitlines() if "CONSOLE" in l and "selftest" not in l]
     assert console == [], console
     shutil.rmtree(tmp_path / "profile", ignore_errors=True)
+
+
+def test_cards_show_the_adaptation_of_each_sample():
+    from crackgen.tools.gallery import _params
+
+    adapted = {"adapt": {"applied": True, "method": "fourier", "band": 0.0312, "target": "site_3.jpg"}}
+    assert _params(adapted, {})["adapt"] == "fourier 0.031 <- site_3.jpg"
+    assert _params({"adapt": {"applied": True, "method": "reinhard", "target": "a.png"}}, {})["adapt"] == \
+        "reinhard <- a.png"
+    assert _params({"adapt": {"applied": False}}, {})["adapt"] == "none"
+    assert _params({}, {})["adapt"] == "none"  # datasets made before [adapt]
