@@ -1,12 +1,10 @@
 """sim2real rows with site adaptation and fine-tuning, the label-efficiency curve, --init."""
 import csv
 import json
-from pathlib import Path
 
-import cv2
-import numpy as np
 import pytest
 import torch
+from real_folders import write_real_folder
 from synthetic_shards import write_shards
 
 from trainer.augment import SampleConfig
@@ -17,25 +15,10 @@ from trainer.sources import RealFolder, ShardSource, split_fraction
 from trainer.stream import SegStream
 
 
-def _real_folder(root: Path, n: int = 12) -> Path:
-    (root / "images").mkdir(parents=True)
-    (root / "masks").mkdir()
-    rng = np.random.default_rng(0)
-    for i in range(n):
-        img = (rng.random((48, 64, 3)) * 60 + 100).astype(np.uint8)
-        m = np.zeros((48, 64), np.uint8)
-        r = int(rng.integers(5, 40))
-        m[r:r + 3, 4:60] = 255
-        img[m > 0] = 20
-        cv2.imwrite(str(root / f"images/{i:03d}.png"), img)
-        cv2.imwrite(str(root / f"masks/{i:03d}.png"), m)
-    return root
-
-
 @pytest.fixture(scope="module")
 def data(tmp_path_factory):
     base = tmp_path_factory.mktemp("sim2real")
-    return {"real": _real_folder(base / "real"), "shards": write_shards(base / "shards", per_shard=4)}
+    return {"real": write_real_folder(base / "real", n=12), "shards": write_shards(base / "shards", per_shard=4)}
 
 
 COMMON = ["--arch", "unet", "--batch-size", "2", "--crop", "32", "--workers", "0", "--no-progress"]

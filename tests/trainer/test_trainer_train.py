@@ -3,33 +3,18 @@ import csv
 import json
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
+from real_folders import write_real_folder
 from synthetic_shards import write_shards
 
 from trainer.cli import main
 
 
-def _real_folder(root: Path, n: int = 8) -> Path:
-    (root / "images").mkdir(parents=True)
-    (root / "masks").mkdir()
-    rng = np.random.default_rng(0)
-    for i in range(n):
-        img = (rng.random((48, 64, 3)) * 60 + 100).astype(np.uint8)
-        m = np.zeros((48, 64), np.uint8)
-        r = int(rng.integers(5, 40))
-        m[r:r + 3, 4:60] = 255
-        img[m > 0] = 20
-        cv2.imwrite(str(root / f"images/{i:03d}.png"), img)
-        cv2.imwrite(str(root / f"masks/{i:03d}.png"), m)
-    return root
-
-
 @pytest.fixture(scope="module")
 def data(tmp_path_factory):
     base = tmp_path_factory.mktemp("trainer")
-    return {"real": _real_folder(base / "real"), "shards": write_shards(base / "shards"), "base": base}
+    return {"real": write_real_folder(base / "real"), "shards": write_shards(base / "shards"), "base": base}
 
 
 def _losses(run: Path) -> dict[int, float]:
