@@ -349,6 +349,47 @@ class AdaptSection(Section):
         return bool(self.target.strip()) and self.probability > 0
 
 
+class CameraEffectsSection(Section):
+    """Post-render camera effects on the RGB views (labels, depth and sensors untouched).
+
+    Each effect has its own probability; the order and formulas are in
+    ``crackgen.postrender.camera_effects``. Off by default."""
+
+    enabled: bool = Field(False, description="apply camera effects to the RGB views (false = off)")
+    exposure: float = Field(0.5, ge=0, le=1, description="probability of an exposure error (0..1)")
+    exposure_ev: _t(-8, 8) = _d({"min": -1.0, "max": 1.0}, "exposure shift (EV, stops): linear light x 2**ev")
+    white_balance: float = Field(0.5, ge=0, le=1, description="probability of a white-balance error (0..1)")
+    wb_shift_mired: _t(-300, 300) = _d(
+        {"min": -40.0, "max": 40.0},
+        "light colour-temperature shift vs the camera's 6500 K white (mired = 1e6/K); positive = warmer image",
+    )
+    wb_tint: _t(-0.5, 0.5) = _d({"min": -0.05, "max": 0.05}, "green gain x (1 + tint) (fraction; negative = magenta)")
+    tone: float = Field(0.5, ge=0, le=1, description="probability of a tone curve (0..1)")
+    tone_gamma: _t(0.2, 5) = _d({"min": 0.8, "max": 1.25}, "exponent on display values y = x**gamma (unitless; >1 darker)")
+    tone_contrast: _t(-1, 1) = _d(
+        {"min": -0.3, "max": 0.5}, "S-curve strength c: y + c*(smoothstep(y) - y) (unitless; 0 = none)"
+    )
+    vignetting: float = Field(0.5, ge=0, le=1, description="probability of vignetting (0..1)")
+    vignette_strength: _t(0, 0.95) = _d(
+        {"min": 0.1, "max": 0.5}, "fraction of light lost at the image corners: gain 1 - s*(r/r_corner)^2"
+    )
+    defocus: float = Field(0.3, ge=0, le=1, description="probability of defocus blur (0..1)")
+    defocus_kernel: _c("disk", "gaussian") = _d({"choices": ["disk", "gaussian"]}, "defocus PSF shape")
+    defocus_radius_px: _t(0, 50, lo_open=True) = _d(
+        {"min": 0.5, "max": 2.0}, "defocus PSF radius (px); gaussian sigma = radius/2"
+    )
+    motion_blur: float = Field(0.2, ge=0, le=1, description="probability of motion blur (0..1)")
+    motion_length_px: _t(0, 100, lo_open=True) = _d({"min": 1.0, "max": 6.0}, "motion blur line length (px)")
+    motion_angle_deg: _t(-360, 360) = _d({"min": 0.0, "max": 180.0}, "motion direction in the image (deg, 0 = x)")
+    noise: float = Field(0.8, ge=0, le=1, description="probability of Poisson-Gaussian sensor noise (0..1)")
+    noise_full_well_e: _t(1, 1e7) = _d(
+        {"min": 500.0, "max": 5000.0}, "electrons at linear 1.0: shot-noise variance = x/full_well (e-)"
+    )
+    noise_read_e: _t(0, 1e4) = _d({"min": 1.0, "max": 5.0}, "read-noise std (electrons)")
+    jpeg: float = Field(0.5, ge=0, le=1, description="probability of JPEG re-compression (0..1)")
+    jpeg_quality: _t(1, 100) = _d({"min": 60.0, "max": 95.0}, "JPEG quality (1-100, rounded to an integer)")
+
+
 class Recipe(Section):
     dataset: DatasetSection = Field(default_factory=DatasetSection)
     crack: CrackSection = Field(default_factory=CrackSection)
@@ -362,6 +403,7 @@ class Recipe(Section):
     lidar: LidarSection = Field(default_factory=LidarSection)
     stereo: StereoSection = Field(default_factory=StereoSection)
     adapt: AdaptSection = Field(default_factory=AdaptSection)
+    camera_effects: CameraEffectsSection = Field(default_factory=CameraEffectsSection)
 
     # set by load_recipe; not part of the schema
     _text: str = ""

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from crackgen.config.recipe import AdaptSection, Recipe
+from crackgen.config.recipe import AdaptSection, CameraEffectsSection, Recipe
 
 # 2: one random stream per section (SECTION_STREAMS) instead of one shared stream.
 SPEC_VERSION = 2
@@ -42,6 +42,7 @@ SECTION_STREAMS: dict[str, int] = {
     "tof": 9,
     "lidar": 10,
     "adapt": 11,
+    "camera_effects": 12,
 }
 
 
@@ -209,6 +210,31 @@ class AdaptSpec:
 
 
 @dataclass
+class CameraEffectsSpec:
+    """Post-render camera effects of the RGB views (``[camera_effects]``).
+
+    ``applied`` names the effects that run, in ``crackgen.postrender.camera_effects.EFFECTS`` order;
+    the values of the others stay neutral."""
+
+    enabled: bool = False
+    applied: list[str] = field(default_factory=list)
+    exposure_ev: float = 0.0  # stops: linear x 2**ev
+    wb_shift_mired: float = 0.0  # light colour-temperature shift (mired)
+    wb_tint: float = 0.0  # green gain x (1 + tint)
+    tone_gamma: float = 1.0
+    tone_contrast: float = 0.0
+    vignette_strength: float = 0.0  # fraction of light lost at the corners
+    defocus_kernel: str = ""  # disk | gaussian
+    defocus_radius_px: float = 0.0
+    motion_length_px: float = 0.0
+    motion_angle_deg: float = 0.0
+    noise_full_well_e: float = 0.0  # electrons at linear 1.0
+    noise_read_e: float = 0.0  # read-noise std (electrons)
+    jpeg_quality: int = 0
+    seed: int = 0  # seeds the sensor noise
+
+
+@dataclass
 class SampleSpec:
     index: int
     recipe_seed: int
@@ -224,6 +250,7 @@ class SampleSpec:
     lidar: LidarSpec
     stereo: StereoSpec
     adapt: AdaptSpec = field(default_factory=AdaptSpec)
+    camera_effects: CameraEffectsSpec = field(default_factory=CameraEffectsSpec)
     version: int = SPEC_VERSION
 
     def to_dict(self) -> dict[str, Any]:
@@ -459,6 +486,40 @@ def draw_adapt(a: AdaptSection, rng: np.random.Generator) -> AdaptSpec:
                      target=a.target, target_fraction=fraction)
 
 
+def draw_camera_effects(c: CameraEffectsSection, rng: np.random.Generator) -> CameraEffectsSpec:
+    """Every draw is made even when the section or an effect is off, so toggling one moves nothing.
+
+    Per effect, in a fixed order: its coin, then its values; the noise seed last."""
+    def coin(p: float) -> bool:
+        return bool(rng.random() < p)
+
+    on = {
+        "exposure": (coin(c.exposure), {"exposure_ev": float(c.exposure_ev.draw(rng))}),
+        "white_balance": (coin(c.white_balance), {"wb_shift_mired": float(c.wb_shift_mired.draw(rng)),
+                                                  "wb_tint": float(c.wb_tint.draw(rng))}),
+        "tone": (coin(c.tone), {"tone_gamma": float(c.tone_gamma.draw(rng)),
+                                "tone_contrast": float(c.tone_contrast.draw(rng))}),
+        "vignetting": (coin(c.vignetting), {"vignette_strength": float(c.vignette_strength.draw(rng))}),
+        "defocus": (coin(c.defocus), {"defocus_kernel": str(c.defocus_kernel.draw(rng)),
+                                      "defocus_radius_px": float(c.defocus_radius_px.draw(rng))}),
+        "motion_blur": (coin(c.motion_blur), {"motion_length_px": float(c.motion_length_px.draw(rng)),
+                                              "motion_angle_deg": float(c.motion_angle_deg.draw(rng))}),
+        "noise": (coin(c.noise), {"noise_full_well_e": float(c.noise_full_well_e.draw(rng)),
+                                  "noise_read_e": float(c.noise_read_e.draw(rng))}),
+        "jpeg": (coin(c.jpeg), {"jpeg_quality": int(round(float(c.jpeg_quality.draw(rng))))}),
+    }
+    seed = _seed(rng)
+    if not c.enabled:
+        return CameraEffectsSpec()
+    spec = CameraEffectsSpec(enabled=True, seed=seed)
+    for name, (applied, values) in on.items():
+        if applied:
+            spec.applied.append(name)
+            for k, v in values.items():
+                setattr(spec, k, v)
+    return spec
+
+
 def make_spec(recipe: Recipe, index: int) -> SampleSpec:
     """Draw every random parameter of sample ``index`` of ``recipe``, each section from its own stream."""
     if not isinstance(recipe, Recipe):
@@ -491,4 +552,5 @@ def make_spec(recipe: Recipe, index: int) -> SampleSpec:
         lidar=_lidar(recipe, rng("lidar")),
         stereo=stereo,
         adapt=draw_adapt(recipe.adapt, rng("adapt")),
+        camera_effects=draw_camera_effects(recipe.camera_effects, rng("camera_effects")),
     )

@@ -30,7 +30,7 @@ import crackgen
 from crackgen.config.recipe import Recipe
 from crackgen.config.spec import SampleSpec, make_spec
 from crackgen.errors import CrackgenError
-from crackgen.postrender.stage import adapt_members
+from crackgen.postrender.stage import adapt_members, camera_effects_members
 from crackgen.postrender.targets import TargetPhotos
 from crackgen.procedural.crackmap import crack_map
 from crackgen.procedural.materials import material_maps
@@ -45,7 +45,7 @@ from crackgen.sim.sensors.stereo import simulate_stereo
 from crackgen.sim.sensors.tof import albedo_from_map, simulate_tof
 
 STAGES = ("spec", "crackmap", "surface", "materials", "shadow", "scene_update", "render",
-          "raycast", "groundtruth", "tof", "lidar", "stereo", "adapt")
+          "raycast", "groundtruth", "tof", "lidar", "stereo", "camera_effects", "adapt")
 SHADOW_PX = 256  # occluder alpha resolution (px per side)
 
 
@@ -197,6 +197,8 @@ class SampleProducer:
                 members["tofamp.exr"] = st.tof_amplitude
             sensors["stereo"] = {"fill_sgm": fill_ratio(st.disp_sgm), "fill_gt": fill_ratio(st.disp_gt)}
         # post-render image stages: RGB views only, after every sensor has read the clean render
+        with tm.stage("camera_effects"):
+            members, camera_effects_meta = camera_effects_members(spec.camera_effects, members)
         with tm.stage("adapt"):
             members, adapt_meta = adapt_members(spec.adapt, members, self.targets if spec.adapt.enabled else None)
 
@@ -231,6 +233,7 @@ class SampleProducer:
             },
             "sensors": sensors,
             "adapt": adapt_meta,
+            "camera_effects": camera_effects_meta,
             "render": {"device": scene_meta.get("device"), "lights": scene_meta.get("lights")},
             "recipe_hash": self.recipe.hash,
             "versions": {"crackgen": crackgen.__version__, "spec": spec.version, **_blender_version()},

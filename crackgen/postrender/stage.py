@@ -1,4 +1,4 @@
-"""The [adapt] post-render stage: apply a sample's drawn ``AdaptSpec`` to its RGB views.
+"""The post-render stages: apply a sample's drawn ``CameraEffectsSpec`` and ``AdaptSpec`` to its RGB views.
 
 Why a separate module: the generator's pipeline and ``crackgen adapt`` (re-adapting
 shards that are already rendered) run the very same step, so a dataset adapted later
@@ -11,8 +11,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from crackgen.config.spec import AdaptSpec
+from crackgen.config.spec import AdaptSpec, CameraEffectsSpec
 from crackgen.postrender.adapt import adapt_views
+from crackgen.postrender.camera_effects import apply_camera_effects, describe
 from crackgen.postrender.targets import TargetPhotos
 from crackgen.shards.members import RGB_MEMBERS
 
@@ -34,4 +35,16 @@ def adapt_members(spec: AdaptSpec, members: Mapping[str, Any],
             "views": [n.split(".")[0] for n in names]}
     if spec.method == "fourier":
         meta["band"] = spec.band
+    return out, meta
+
+
+def camera_effects_members(spec: CameraEffectsSpec, members: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(members with camera effects on every RGB view, metadata); every other member is passed through as is."""
+    names = [f"{m}.png" for m in RGB_MEMBERS if f"{m}.png" in members]  # left view first
+    meta = describe(spec)
+    if not meta["applied"]:
+        return dict(members), meta
+    out = dict(members)
+    out.update(zip(names, apply_camera_effects([np.asarray(members[n]) for n in names], spec)))
+    meta["views"] = [n.split(".")[0] for n in names]
     return out, meta
