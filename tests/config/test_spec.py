@@ -70,6 +70,7 @@ TOGGLES = [
         "[material.distractors]\njoint = 1.0\nsealant = 0.5\nstain = 0.0\nmarking = 1.0",
     ),
     ("adapt", '[adapt]\ntarget = ""', '[adapt]\ntarget = "photos"\nprobability = 0.7'),
+    ("camera_effects", "[camera_effects]\nenabled = false", "[camera_effects]\nenabled = true\nnoise = 1.0"),
 ]
 
 
@@ -138,7 +139,7 @@ def test_stereo_baseline_comes_from_the_stereo_section():
 
 
 def test_every_section_differs_between_samples():
-    r = parse_recipe('[stereo]\nenabled = true\n[adapt]\ntarget = "photos"')
+    r = parse_recipe('[stereo]\nenabled = true\n[adapt]\ntarget = "photos"\n[camera_effects]\nenabled = true')
     a, b = make_spec(r, 0), make_spec(r, 1)
     for name in SECTIONS:
         if name == "surface" or name == "render":
