@@ -1,4 +1,4 @@
-"""`crackgen` command line: generate, validate, inspect, bench, show, verify, export, adapt.
+"""`crackgen` command line: generate, validate, inspect, bench, show, verify, export, adapt, stats.
 
 Each subcommand imports its heavy modules lazily so `crackgen --help` and
 `crackgen validate` stay fast. Bad input exits 1 with one line per problem; a run
@@ -152,6 +152,19 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_stats(args: argparse.Namespace) -> int:
+    from crackgen.tools.stats import StatsError, compute_stats, format_stats, write_json
+
+    try:
+        result = compute_stats(args.path, limit=args.limit, progress=not args.no_progress)
+        print(format_stats(result))
+        if args.json:
+            print(f"wrote {write_json(result, args.json)}")
+    except StatsError as exc:
+        return _err(str(exc))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     from crackgen.datagen.backends import BACKENDS  # the --backend choices (registry keys)
 
@@ -225,6 +238,14 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--resume", action="store_true", help="keep verified output shards, redo the rest")
     a.add_argument("--no-progress", action="store_true", help="no progress bar")
     a.set_defaults(func=_cmd_adapt)
+
+    st = sub.add_parser("stats", help="crack width, pixel fraction, components and image statistics "
+                                      "of shards or an images/ + masks/ folder")
+    st.add_argument("path", metavar="DIR|FOLDER", help="a crackgen dataset, or a folder with images/ and masks/")
+    st.add_argument("--json", default=None, metavar="OUT", help="also write the statistics as JSON")
+    st.add_argument("--limit", type=int, default=None, help="at most this many images")
+    st.add_argument("--no-progress", action="store_true", help="no progress bar")
+    st.set_defaults(func=_cmd_stats)
     return p
 
 
