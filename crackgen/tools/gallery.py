@@ -147,6 +147,28 @@ def _adapt_label(a: dict[str, Any]) -> str:
     return f"{a.get('method')}{band} <- {a.get('target')}"
 
 
+_CAMFX_SHORT = {  # effect -> (short name, metadata key of its main value, format)
+    "exposure": ("ev", "exposure_ev", "{:+.2f}"),
+    "white_balance": ("wb", "wb_shift_mired", "{:+.0f}mired"),
+    "tone": ("gamma", "tone_gamma", "{:.2f}"),
+    "vignetting": ("vig", "vignette_strength", "{:.2f}"),
+    "defocus": ("defocus", "defocus_radius_px", "{:.1f}px"),
+    "motion_blur": ("motion", "motion_length_px", "{:.1f}px"),
+    "noise": ("noise", "noise_full_well_e", "{:.0f}e"),
+    "jpeg": ("jpeg", "jpeg_quality", "q{}"),
+}
+
+
+def _camfx_label(c: dict[str, Any]) -> str:
+    """``ev:+0.31,noise:1200e,jpeg:q83``: each applied camera effect with its main value; ``none`` otherwise."""
+    parts = []
+    for name in c.get("applied") or []:
+        short, key, fmt = _CAMFX_SHORT.get(name, (name, None, ""))
+        value = c.get(key) if key else None
+        parts.append(short + (":" + fmt.format(value) if value is not None else ""))
+    return ",".join(parts) or "none"
+
+
 def _params(meta: dict[str, Any], sample: dict[str, Any]) -> dict[str, Any]:
     spec = meta.get("spec", {})
     cam = spec.get("camera", {})
@@ -154,6 +176,7 @@ def _params(meta: dict[str, Any], sample: dict[str, Any]) -> dict[str, Any]:
     lights = spec.get("lights", [])
     p: dict[str, Any] = {
         "family": meta.get("material", {}).get("family") or spec.get("material", {}).get("family"),
+        "shape": (meta.get("crack") or {}).get("shape", "fbm"),
         "distractors": ",".join(meta.get("material", {}).get("distractors", [])) or "-",
         "lights": ",".join(L.get("kind", "?") for L in lights),
         "shadow": meta.get("shadow", {}).get("pattern") if meta.get("shadow", {}).get("enabled") else "none",
@@ -163,6 +186,7 @@ def _params(meta: dict[str, Any], sample: dict[str, Any]) -> dict[str, Any]:
         "crack_len_m": crack.get("length_m"),
         "crack_px_frac": crack.get("pixel_fraction"),
         "adapt": _adapt_label(meta.get("adapt") or {}),
+        "camera_fx": _camfx_label(meta.get("camera_effects") or {}),
     }
     if "mask" in sample and p["crack_px_frac"] is None:
         p["crack_px_frac"] = float((sample["mask"] > 127).mean())
@@ -260,12 +284,14 @@ def _summary_html(entries: list[_Entry]) -> str:
     def col(k: str) -> list[float]:
         return [p[k] for p in P if isinstance(p.get(k), (int, float))]
 
-    def counts(k: str, split: bool = False, method_only: bool = False) -> dict[str, int]:
+    def counts(k: str, split: bool = False, method_only: bool = False, name_only: bool = False) -> dict[str, int]:
         out: dict[str, int] = {}
         for p in P:
             vals = str(p.get(k)).split(",") if split else [str(p.get(k))]
             if method_only:
                 vals = [v.split(" ", 1)[0] for v in vals]
+            if name_only:  # "ev:+0.31" -> "ev"
+                vals = [v.split(":", 1)[0] for v in vals]
             for v in vals:
                 out[v] = out.get(v, 0) + 1
         return out
@@ -278,9 +304,11 @@ def _summary_html(entries: list[_Entry]) -> str:
         svg_histogram(col("cam_dist_m"), "camera distance (m)"),
         svg_histogram(col("tilt_deg"), "camera tilt (deg)"),
         svg_counts(counts("family"), "material family"),
+        svg_counts(counts("shape"), "crack shape family"),
         svg_counts(counts("lights", split=True), "light kinds"),
         svg_counts(counts("shadow"), "shadow pattern"),
         svg_counts(counts("adapt", method_only=True), "site adaptation method"),
+        svg_counts(counts("camera_fx", split=True, name_only=True), "camera effects applied"),
     ]
     return "".join(charts)
 

@@ -120,3 +120,31 @@ def test_cards_show_the_adaptation_of_each_sample():
         "reinhard <- a.png"
     assert _params({"adapt": {"applied": False}}, {})["adapt"] == "none"
     assert _params({}, {})["adapt"] == "none"  # datasets made before [adapt]
+
+
+def test_cards_show_shape_family_and_camera_effects(tmp_path):
+    from crackgen.config.spec import CameraEffectsSpec
+    from crackgen.postrender.camera_effects import describe
+    from crackgen.shards import ShardWriter, sample_key
+    from crackgen.tools.bench_shards import synthetic_sample
+    from crackgen.tools.gallery import _params
+
+    fx = describe(CameraEffectsSpec(enabled=True, applied=["exposure", "noise", "jpeg"], exposure_ev=0.314,
+                                    noise_full_well_e=1234.4, noise_read_e=2.0, jpeg_quality=83, seed=1))
+    p = _params({"camera_effects": fx, "crack": {"shape": "fracture"}}, {})
+    assert p["camera_fx"] == "ev:+0.31,noise:1234e,jpeg:q83" and p["shape"] == "fracture"
+    old = _params({"crack": {"length_m": 1.0}}, {})  # datasets made before shapes and camera effects
+    assert old["camera_fx"] == "none" and old["shape"] == "fbm"
+    assert _params({"camera_effects": {"applied": []}}, {})["camera_fx"] == "none"
+
+    rng = np.random.default_rng(0)
+    root = tmp_path / "ds"
+    with ShardWriter(root, 0) as w:
+        for i, meta in enumerate(({"camera_effects": fx, "crack": {"shape": "network"}}, {})):
+            smp = synthetic_sample(rng, 32, 8)
+            w.add(sample_key(0, i), {k: smp[k] for k in ("rgb.png", "mask.png", "depth.exr")} | {"json": meta})
+    text = write_gallery(root).read_text()
+    data = json.loads(re.search(r'<script type="application/json" id="samples">(.*?)</script>', text, re.S).group(1))
+    assert [it["params"]["shape"] for it in data["items"]] == ["network", "fbm"]
+    assert [it["params"]["camera_fx"] for it in data["items"]] == ["ev:+0.31,noise:1234e,jpeg:q83", "none"]
+    assert "crack shape family" in text and "camera effects applied" in text
