@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from typing import Callable
 
+import cv2
 import numpy as np
 from numba import njit, prange
 
@@ -150,8 +151,10 @@ def stains(rng: np.random.Generator, grid: TexGrid, amount: float, albedo, rough
 
 def moss(rng: np.random.Generator, grid: TexGrid, amount: float, albedo, roughness, height) -> np.ndarray:
     """Moss / lichen: greenish patches that prefer the low areas of the height map."""
-    f = grid.field(_seed(rng), rng.uniform(0.03, 0.15), 4, 0.6)
-    h = height - height.mean()
+    scale = rng.uniform(0.03, 0.15)
+    f = grid.field(_seed(rng), scale, 4, 0.6)
+    smooth = cv2.GaussianBlur(height, (0, 0), max(0.5 * scale / grid.texel_m, 0.5))  # low areas, not grooves
+    h = smooth - smooth.mean()
     low = -h / max(float(h.std()), 1e-9)
     g = f + np.float32(0.7) * np.clip(low, -3, 3).astype(np.float32)
     thr = quantile_fast(g, 1.0 - float(np.clip(amount * rng.uniform(0.05, 0.2), 0.0, 1.0)))

@@ -63,33 +63,39 @@ def srgb_to_linear(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
-def remove_thin_dark_lines(rgb: np.ndarray, line_px: int = 7, min_contrast: float = 18.0,
+def remove_thin_dark_lines(rgb: np.ndarray, line_px: int | None = None, min_contrast: float = 12.0,
                            min_elongation: float = 4.0, min_length_px: int = 12) -> tuple[np.ndarray, np.ndarray]:
     """Inpaint thin, elongated dark structures (possible cracks) of a uint8 RGB photo.
 
     Black-hat (closing minus image) with a disc about ``2 * line_px`` wide finds dark
-    features narrower than that; components whose bounding-rectangle elongation is at
-    least ``min_elongation`` and whose length is at least ``min_length_px`` are lines,
-    round ones (pores) are kept. Returns (cleaned RGB, bool mask of what was removed)."""
+    features narrower than that. Components are taken at half the threshold (hysteresis,
+    so a crack is not cut into dashes) and kept if they reach the full threshold and
+    their bounding-rectangle elongation is at least ``min_elongation`` and length at least
+    ``min_length_px``: lines go, round ones (pores) stay. Returns (cleaned RGB, removed mask)."""
     gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+    if line_px is None:
+        line_px = max(5, int(round(min(gray.shape) / 40)))
     k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * line_px + 1, 2 * line_px + 1))
     bh = cv2.morphologyEx(gray, cv2.MORPH_BLACKHAT, k)
     thr = max(min_contrast, float(bh.mean() + 3.0 * bh.std()))
-    cand = (bh > thr).astype(np.uint8)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(cand, connectivity=8)
+    strong = bh > thr
+    n, labels, stats, _ = cv2.connectedComponentsWithStats((bh > 0.5 * thr).astype(np.uint8), connectivity=8)
+    has_strong = np.zeros(n, bool)
+    has_strong[np.unique(labels[strong])] = True
     keep = np.zeros(n, bool)
-    for c in range(1, n):
-        if stats[c, cv2.CC_STAT_AREA] < 3:
+    for c in np.nonzero(has_strong)[0]:
+        if c == 0 or stats[c, cv2.CC_STAT_AREA] < 3:
             continue
         ys, xs = np.nonzero(labels == c)
         (_, _), (w, h), _ = cv2.minAreaRect(np.column_stack([xs, ys]).astype(np.float32))
         long, short = max(w, h) + 1.0, min(w, h) + 1.0
-        keep[c] = long >= min_length_px and long / short >= min_elongation
+        thin = stats[c, cv2.CC_STAT_AREA] / (long * short) < 0.5  # a curved or branching line fills little of its box
+        keep[c] = long >= min_length_px and (long / short >= min_elongation or (thin and long >= 3 * min_length_px))
     mask = keep[labels]
     if not mask.any():
         return rgb.copy(), mask
     grow = cv2.dilate(mask.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=2)
-    cleaned = cv2.inpaint(np.ascontiguousarray(rgb), grow, 3, cv2.INPAINT_TELEA)
+    cleaned = cv2.inpaint(np.ascontiguousarray(rgb), grow, 5, cv2.INPAINT_TELEA)
     return cleaned, grow.astype(bool)
 
 
