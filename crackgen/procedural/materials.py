@@ -375,17 +375,22 @@ def _photo(spec: MaterialSpec, fam: Family, grid: TexGrid, albedo, roughness, he
 def cavity_factor(crack_mask: np.ndarray, crack_depth: np.ndarray, texel_m: float, strength: float) -> np.ndarray:
     """Albedo multiplier (T,T) for light lost in the crack cavity: 1 outside cracks.
 
-    A texel at distance ``e`` from the crack edge and ``h`` below the surface sees the
-    sky through an opening of about e / sqrt(e^2 + h^2): deep, narrow centres go near
-    black, the shallow edges stay as they were (sharp dark cores, as in real photos)."""
+    A texel ``h`` below the surface, ``e1`` from the near rim and ``e2`` from the far rim
+    (local width minus e1) receives the cosine-weighted sky view of a 2-D slot,
+    (e1 / sqrt(e1^2 + h^2) + e2 / sqrt(e2^2 + h^2)) / 2: deep, narrow centres go near
+    black, the rims keep at least half their light (sharp dark cores, as in real photos)."""
     out = np.ones(crack_mask.shape, np.float32)
     if strength <= 0 or not crack_mask.any():
         return out
-    e = (cv2.distanceTransform(crack_mask.astype(np.uint8), cv2.DIST_L2, 5) - 0.5) * np.float32(texel_m)
-    e = np.maximum(e, np.float32(0.5 * texel_m))
+    dt = cv2.distanceTransform(crack_mask.astype(np.uint8), cv2.DIST_L2, 5)
+    r = int(min(max(math.ceil(float(dt.max())), 1), 15))
+    half_w = cv2.dilate(dt, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)))
+    t = np.float32(texel_m)
+    e1 = np.maximum(dt - 0.5, 0.5) * t
+    e2 = np.maximum(2.0 * half_w - dt - 0.5, 0.5) * t
     h = np.maximum(crack_depth, 0.0)
-    ao = e / np.sqrt(e * e + h * h)
-    out[crack_mask] = 1.0 - np.float32(strength) * (1.0 - ao[crack_mask])
+    view = 0.5 * (e1 / np.sqrt(e1 * e1 + h * h) + e2 / np.sqrt(e2 * e2 + h * h))
+    out[crack_mask] = 1.0 - np.float32(strength) * (1.0 - view[crack_mask])
     return out
 
 
