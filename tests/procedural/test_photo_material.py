@@ -11,9 +11,8 @@ from crackgen.config.recipe import parse_recipe
 from crackgen.config.spec import MaterialSpec, make_spec
 from crackgen.datagen.generate import GenerateError, check_inputs
 from crackgen.procedural.materials import MaterialError, material_maps
-from crackgen.procedural.photo import remove_thin_dark_lines
+from crackgen.procedural.photo import PhotoLook, _cover, photo_maps, remove_thin_dark_lines, srgb_to_linear
 from crackgen.procedural.texgrid import TexGrid
-from crackgen.procedural.photo import PhotoLook, _cover, photo_maps, srgb_to_linear
 
 
 class FlatCrackMap:
