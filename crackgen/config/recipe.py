@@ -175,7 +175,8 @@ def _d(default: Any, doc: str) -> Any:
     return Field(default_factory=lambda: Dist.model_validate(default), description=doc)
 
 
-FAMILIES = ("asphalt", "concrete", "masonry", "steel", "blockwork")  # = blender_assets/materials/*.toml
+FAMILIES = ("asphalt", "concrete", "masonry", "steel", "blockwork", "photo")  # = blender_assets/materials/*.toml
+CLUTTER_KINDS = ("pores", "gaps", "stains", "moss", "patch")  # = crackgen.procedural.clutter.CLUTTER
 
 
 class DatasetSection(Section):
@@ -208,9 +209,21 @@ class DistractorSection(Section):
     marking: float = Field(0.15, ge=0, le=1, description="probability of a painted road marking")
 
 
+class ClutterSection(Section):
+    """Real-world surface clutter, never labelled: the dark non-crack structure real photos have."""
+
+    pores: float = Field(0.0, ge=0, le=1, description="probability of pores and voids (dark pits, 0.5-5 mm)")
+    gaps: float = Field(0.0, ge=0, le=1, description="probability of aggregate gaps (short dark curved gaps between stones)")
+    stains: float = Field(0.0, ge=0, le=1, description="probability of small stains (grime and rust spots)")
+    moss: float = Field(0.0, ge=0, le=1, description="probability of moss / lichen in low areas")
+    patch: float = Field(0.0, ge=0, le=1, description="probability of a paint or patch repair (other material, visible edge)")
+    amount: _t(0, 1) = _d({"min": 0.3, "max": 1.0}, "amount (number / coverage) of each present kind, fraction of its maximum")
+
+
 class MaterialSection(Section):
     family: _c(*FAMILIES) = _d(
-        {"choices": list(FAMILIES), "weights": [0.4, 0.3, 0.1, 0.1, 0.1]}, "material family (blender_assets/materials)"
+        {"choices": list(FAMILIES[:5]), "weights": [0.4, 0.3, 0.1, 0.1, 0.1]},
+        "material family (blender_assets/materials); 'photo' needs photo_folder",
     )
     texture_px: int = Field(1024, ge=16, le=8192, description="texture map resolution per side (px)")
     hue_shift: _t(-0.5, 0.5) = _d({"min": -0.05, "max": 0.05}, "colour variation (fraction)")
@@ -219,6 +232,20 @@ class MaterialSection(Section):
     crack_darkening: _t(0, 1) = _d({"min": 0.15, "max": 0.45}, "albedo multiplier inside cracks")
     crack_roughness: _t(0, 1) = _d({"min": 0.8, "max": 1.0}, "roughness inside cracks")
     distractors: DistractorSection = Field(default_factory=DistractorSection)
+    crack_cavity: _t(0, 1) = _d(0.0, "cavity darkening inside cracks (0 = off, 1 = near-black at deep narrow centres)")
+    crack_dirt: float = Field(0.0, ge=0, le=1, description="probability of dust / debris partly filling the cracks")
+    crack_spall: float = Field(0.0, ge=0, le=1, description="probability of spalled (chipped) crack edges, unlabelled")
+    photo_folder: str = Field("", max_length=4096, description='folder of crack-free surface photos for family "photo"')
+    photo_size_m: _t(0.01, 100) = _d({"min": 0.3, "max": 1.0}, "surface side covered by one photo side (m)")
+    photo_clean: _c("none", "blackhat") = _d("blackhat", "photo: suppress thin dark lines (possible cracks) before use")
+    clutter: ClutterSection = Field(default_factory=ClutterSection)
+
+    @model_validator(mode="after")
+    def _photo_needs_folder(self) -> "MaterialSection":
+        w = self.family.weights or [1.0] * len(self.family.support())
+        if any(v == "photo" and wt > 0 for v, wt in zip(self.family.support(), w)) and not self.photo_folder.strip():
+            raise PydanticCustomError("field_ref", "{sub}: required when family can be 'photo'", {"sub": "photo_folder"})
+        return self
 
 
 class LightsSection(Section):

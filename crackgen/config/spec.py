@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from crackgen.config.recipe import AdaptSection, CameraEffectsSection, Recipe
+from crackgen.config.recipe import CLUTTER_KINDS, AdaptSection, CameraEffectsSection, Recipe
 
 # 2: one random stream per section (SECTION_STREAMS) instead of one shared stream.
 SPEC_VERSION = 2
@@ -78,6 +78,15 @@ class DistractorSpec:
 
 
 @dataclass
+class ClutterSpec:
+    """Real-world clutter painted into the material (pores, gaps, stains, moss, patch); never labelled."""
+
+    kind: str  # crackgen.config.recipe.CLUTTER_KINDS
+    seed: int
+    amount: float  # 0..1, fraction of the kind's maximum number / coverage
+
+
+@dataclass
 class MaterialSpec:
     family: str  # asphalt | concrete | masonry | steel (blender_assets/materials/*.toml)
     seed: int  # seeds the texture noise
@@ -88,6 +97,16 @@ class MaterialSpec:
     crack_darkening: float  # albedo multiplier inside the crack (0..1)
     crack_roughness: float  # roughness inside the crack (0..1)
     distractors: list[DistractorSpec] = field(default_factory=list)
+    # Defaults below keep older spec JSON loadable and mean "as before" (off).
+    crack_cavity: float = 0.0  # cavity darkening inside cracks (0 = off)
+    crack_dirt: bool = False  # dust / debris partly filling the cracks
+    crack_spall: bool = False  # chipped crack edges (texture only, unlabelled)
+    crack_seed: int = 0  # seeds dirt and spall
+    photo_folder: str = ""  # family "photo": the recipe's folder of crack-free photos
+    photo_fraction: float = 0.0  # which photo: fraction in [0, 1) of the sorted folder listing
+    photo_size_m: float = 0.0  # surface side covered by one photo side (m)
+    photo_clean: str = "none"  # none | blackhat
+    clutter: list[ClutterSpec] = field(default_factory=list)
 
 
 @dataclass
@@ -351,7 +370,30 @@ def _material(recipe: Recipe, rng: np.random.Generator) -> MaterialSpec:
         seed = _seed(rng)
         if present:
             spec.distractors.append(DistractorSpec(kind=kind, seed=seed))
+    _material_appearance(m, rng, spec)
     return spec
+
+
+def _material_appearance(m: Any, rng: np.random.Generator, spec: MaterialSpec) -> None:
+    """Crack interior, photo and clutter draws: appended after every older material draw and always
+    made, so recipes without these features keep every earlier draw byte-identical."""
+    cavity = float(m.crack_cavity.draw(rng))
+    dirt = bool(rng.random() < m.crack_dirt)
+    spall = bool(rng.random() < m.crack_spall)
+    crack_seed = _seed(rng)
+    fraction = float(rng.random())
+    photo_size = float(m.photo_size_m.draw(rng))
+    clean = str(m.photo_clean.draw(rng))
+    spec.crack_cavity, spec.crack_dirt, spec.crack_spall, spec.crack_seed = cavity, dirt, spall, crack_seed
+    if spec.family == "photo":
+        spec.photo_folder, spec.photo_fraction, spec.photo_size_m, spec.photo_clean = (
+            m.photo_folder, fraction, photo_size, clean)
+    amount = m.clutter.amount
+    for kind in CLUTTER_KINDS:
+        present = rng.random() < getattr(m.clutter, kind)
+        seed, a = _seed(rng), float(amount.draw(rng))
+        if present:
+            spec.clutter.append(ClutterSpec(kind=kind, seed=seed, amount=a))
 
 
 def _lights(recipe: Recipe, rng: np.random.Generator) -> list[LightSpec]:

@@ -197,10 +197,18 @@ class GenerateOptions:
 
 
 def check_inputs(recipe: Recipe) -> None:
-    """Files the recipe points to, checked before any rendering: the [adapt] target photos."""
+    """Files the recipe points to, checked before any rendering: the [adapt] target photos and the
+    photo family's folder (when the family distribution can draw "photo")."""
     if recipe.adapt.enabled:
         try:
             TargetPhotos(recipe.adapt.target)
+        except TargetError as exc:
+            raise GenerateError(str(exc)) from None
+    m = recipe.material
+    weights = m.family.weights or [1.0] * len(m.family.support())
+    if any(f == "photo" and w > 0 for f, w in zip(m.family.support(), weights)):
+        try:
+            TargetPhotos(m.photo_folder, what="material.photo_folder")
         except TargetError as exc:
             raise GenerateError(str(exc)) from None
 

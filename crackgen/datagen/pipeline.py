@@ -223,7 +223,8 @@ class SampleProducer:
                 "surface_coverage": cm.coverage,
                 "pixel_fraction": crack_pixel_fraction(gt.mask),
             },
-            "material": {"family": spec.material.family, "distractors": [d.kind for d in spec.material.distractors]},
+            "material": {"family": spec.material.family, "distractors": [d.kind for d in spec.material.distractors],
+                         "clutter": [c.kind for c in spec.material.clutter], "photo": maps.photo},
             "lights": [{"kind": L.kind, "elevation_deg": float(np.degrees(L.elevation_rad))} for L in spec.lights],
             "shadow": {"enabled": spec.shadow.enabled, "pattern": spec.shadow.pattern},
             "depth": {

@@ -26,20 +26,21 @@ class TargetError(CrackgenError, ValueError):
 class TargetPhotos:
     """Sorted, checked list of photos in one folder (not recursive)."""
 
-    def __init__(self, folder: str | Path, check: bool = True):
+    def __init__(self, folder: str | Path, check: bool = True, what: str = "adapt target"):
         self.folder = Path(folder).expanduser()
+        self.what = what  # how error messages name the folder (the recipe field)
         if not self.folder.is_dir():
-            raise TargetError(f"adapt target {self.folder}: no such folder")
+            raise TargetError(f"{what} {self.folder}: no such folder")
         self.paths = sorted(p for p in self.folder.iterdir() if p.suffix.lower() in PHOTO_EXTS and p.is_file())
         if not self.paths:
-            raise TargetError(f"adapt target {self.folder}: no photos ({', '.join(PHOTO_EXTS)})")
+            raise TargetError(f"{what} {self.folder}: no photos ({', '.join(PHOTO_EXTS)})")
         if check:
             for p in self.paths:
                 try:
                     with Image.open(p) as im:
                         im.verify()
                 except (UnidentifiedImageError, OSError, SyntaxError) as exc:
-                    raise TargetError(f"adapt target {p}: unreadable image ({exc})") from None
+                    raise TargetError(f"{what} {p}: unreadable image ({exc})") from None
 
     def __len__(self) -> int:
         return len(self.paths)
@@ -51,14 +52,14 @@ class TargetPhotos:
 
     def load(self, name: str) -> np.ndarray:
         """uint8 RGB of one photo by file name."""
-        return _read_rgb(str(self.folder / name))
+        return _read_rgb(str(self.folder / name), self.what)
 
 
 @lru_cache(maxsize=64)
-def _read_rgb(path: str) -> np.ndarray:
+def _read_rgb(path: str, what: str = "adapt target") -> np.ndarray:
     img = cv2.imread(path, cv2.IMREAD_COLOR)
     if img is None:
-        raise TargetError(f"adapt target {path}: unreadable image")
+        raise TargetError(f"{what} {path}: unreadable image")
     out = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
     out.setflags(write=False)
     return out

@@ -30,7 +30,9 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from crackgen.config.spec import MaterialSpec
 from crackgen.errors import CrackgenError
+from crackgen.procedural.clutter import CLUTTER, paint_clutter
 from crackgen.procedural.distractors import DISTRACTORS, paint_distractor
+from crackgen.procedural.photo import PhotoError, PhotoLook, photo_folder, photo_maps
 from crackgen.procedural.texgrid import TexGrid, clip01, quantile_fast, smoothstep
 
 ASSETS_ENV = "CRACKGEN_ASSETS"
@@ -133,6 +135,22 @@ class Paint(_Model):
         return self
 
 
+class PhotoParams(_Model):
+    """How the ``photo`` family turns a user's photo into maps (``[photo]`` in ``photo.toml``)."""
+
+    albedo_mean: tuple[Unit, Unit] = Field((0.15, 0.35), description="linear mean albedo range, drawn per sample")
+    roughness: Unit = Field(0.75, description="roughness at average local contrast")
+    roughness_contrast: float = Field(0.15, ge=0, le=1, description="roughness change per std of local contrast")
+    contrast_m: float = Field(0.004, gt=0, le=1, description="local contrast window (m)")
+    height_m: float = Field(0.0004, ge=0, le=0.05, description="height std from the luminance high-pass (m)")
+    highpass_m: float = Field(0.006, gt=0, le=1, description="height high-pass scale (m)")
+
+    @model_validator(mode="after")
+    def _order(self) -> "PhotoParams":
+        _ordered(self.albedo_mean, "albedo_mean")
+        return self
+
+
 class Family(_Model):
     """One material family, as read from ``blender_assets/materials/<name>.toml``."""
 
@@ -145,6 +163,7 @@ class Family(_Model):
     speckles: list[Speckles] = Field(default_factory=list)
     bricks: Bricks | None = None
     paint: Paint | None = None
+    photo: PhotoParams | None = None
 
 
 def assets_dir() -> Path:
@@ -217,6 +236,8 @@ class MaterialMaps:
     height_m: np.ndarray  # (T,T) float32 micro height (m) the normal map is derived from, crack depth included
     distractor_mask: np.ndarray  # (T,T) bool where distractors were painted (GT mask stays empty there)
     crack_mask: np.ndarray  # (T,T) bool crack map mask resampled (nearest) to T
+    clutter_mask: np.ndarray | None = None  # (T,T) bool where clutter was painted (never labelled)
+    photo: str = ""  # family "photo": the photo's file name
 
     @property
     def px(self) -> int:
@@ -264,6 +285,9 @@ def material_maps(spec: MaterialSpec, cm: CrackMapLike) -> MaterialMaps:
         if d.kind not in DISTRACTORS:
             known = ", ".join(DISTRACTORS)
             raise MaterialError(f"material.distractors[{k}].kind: unknown kind {d.kind!r} (known: {known})")
+    for k, c in enumerate(spec.clutter):
+        if c.kind not in CLUTTER:
+            raise MaterialError(f"material.clutter[{k}].kind: unknown kind {c.kind!r} (known: {', '.join(CLUTTER)})")
     px = int(spec.texture_px)
     if px < 4:
         raise MaterialError(f"material.texture_px: must be >= 4, got {px}")
@@ -280,6 +304,9 @@ def material_maps(spec: MaterialSpec, cm: CrackMapLike) -> MaterialMaps:
     roughness = np.full((px, px), fam.roughness, np.float32)
     height = np.zeros((px, px), np.float32)
 
+    photo = ""
+    if spec.family == "photo":
+        photo = _photo(spec, fam, grid, albedo, roughness, height)
     if fam.bricks is not None:
         _bricks(fam.bricks, grid, rng, albedo, roughness, height)
     for sp in fam.speckles:
@@ -297,6 +324,9 @@ def material_maps(spec: MaterialSpec, cm: CrackMapLike) -> MaterialMaps:
     distractor_mask = np.zeros((px, px), bool)
     for d in spec.distractors:
         distractor_mask |= paint_distractor(d.kind, d.seed, grid, albedo, roughness, height)
+    clutter_mask = np.zeros((px, px), bool)
+    for c in spec.clutter:
+        clutter_mask |= paint_clutter(c.kind, c.seed, c.amount, grid, albedo, roughness, height)
 
     crack_mask, crack_depth = resample_crack(cm, px)
     idx = np.nonzero(crack_mask)
@@ -304,6 +334,7 @@ def material_maps(spec: MaterialSpec, cm: CrackMapLike) -> MaterialMaps:
     dark = spec.crack_darkening * crng.uniform(0.8, 1.2, size=idx[0].size).astype(np.float32)
     albedo[idx] *= dark[:, None]
     roughness[idx] = spec.crack_roughness
+    crack_interior(spec, grid, crack_mask, crack_depth, albedo, roughness, height)
     height -= crack_depth
 
     clip01(albedo)
@@ -315,7 +346,93 @@ def material_maps(spec: MaterialSpec, cm: CrackMapLike) -> MaterialMaps:
         height_m=height,
         distractor_mask=distractor_mask,
         crack_mask=crack_mask,
+        clutter_mask=clutter_mask,
+        photo=photo,
     )
+
+
+# ----------------------------------------------------------------------------- photo family and crack interiors
+
+
+def _photo(spec: MaterialSpec, fam: Family, grid: TexGrid, albedo, roughness, height) -> str:
+    """Replace the base maps with the drawn photo's; returns its file name."""
+    if not spec.photo_folder:
+        raise MaterialError("material.photo_folder: required for family 'photo'")
+    try:
+        folder = photo_folder(spec.photo_folder)
+        name = folder.name_for(spec.photo_fraction)
+        rgb = folder.load(name)
+    except (PhotoError, CrackgenError) as exc:
+        raise MaterialError(str(exc)) from None
+    look = PhotoLook(**fam.photo.model_dump()) if fam.photo is not None else PhotoLook()
+    size = spec.photo_size_m if spec.photo_size_m > 0 else 0.5
+    a, r, h = photo_maps(rgb, grid, size, spec.photo_clean, look, _rng(spec.seed, 3))
+    albedo[:], roughness[:] = a, r
+    height += h
+    return name
+
+
+def cavity_factor(crack_mask: np.ndarray, crack_depth: np.ndarray, texel_m: float, strength: float) -> np.ndarray:
+    """Albedo multiplier (T,T) for light lost in the crack cavity: 1 outside cracks.
+
+    A texel ``h`` below the surface, ``e1`` from the near rim and ``e2`` from the far rim
+    (local width minus e1) receives the cosine-weighted sky view of a 2-D slot,
+    (e1 / sqrt(e1^2 + h^2) + e2 / sqrt(e2^2 + h^2)) / 2: deep, narrow centres go near
+    black, the rims keep at least half their light (sharp dark cores, as in real photos)."""
+    out = np.ones(crack_mask.shape, np.float32)
+    if strength <= 0 or not crack_mask.any():
+        return out
+    dt = cv2.distanceTransform(crack_mask.astype(np.uint8), cv2.DIST_L2, 5)
+    r = int(min(max(math.ceil(float(dt.max())), 1), 15))
+    half_w = cv2.dilate(dt, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)))
+    t = np.float32(texel_m)
+    e1 = np.maximum(dt - 0.5, 0.5) * t
+    e2 = np.maximum(2.0 * half_w - dt - 0.5, 0.5) * t
+    h = np.maximum(crack_depth, 0.0)
+    view = 0.5 * (e1 / np.sqrt(e1 * e1 + h * h) + e2 / np.sqrt(e2 * e2 + h * h))
+    out[crack_mask] = 1.0 - np.float32(strength) * (1.0 - view[crack_mask])
+    return out
+
+
+def crack_interior(spec: MaterialSpec, grid: TexGrid, crack_mask: np.ndarray, crack_depth: np.ndarray,
+                   albedo, roughness, height) -> None:
+    """Cavity darkening, dirt fill and spalled edges (each off by default: today's look)."""
+    if spec.crack_cavity > 0:
+        albedo *= cavity_factor(crack_mask, crack_depth, grid.texel_m, spec.crack_cavity)[..., None]
+    if not (spec.crack_dirt or spec.crack_spall) or not crack_mask.any():
+        return
+    rng = _rng(spec.crack_seed, 0x5BA1)
+    dirt_seed, spall_seed = _seed(rng), _seed(rng)  # both always drawn: one never moves the other
+    if spec.crack_dirt:
+        _crack_dirt(np.random.default_rng(dirt_seed), grid, crack_mask, crack_depth, albedo, roughness, height)
+    if spec.crack_spall:
+        _crack_spall(np.random.default_rng(spall_seed), grid, crack_mask, albedo, roughness, height)
+
+
+def _crack_dirt(rng: np.random.Generator, grid: TexGrid, crack_mask, crack_depth, albedo, roughness, height) -> None:
+    """Dust and debris lying in parts of the crack: lighter than the cavity, rough, partly filling it."""
+    f = grid.field(_seed(rng), rng.uniform(0.02, 0.08), 3)
+    thr = float(np.quantile(f[crack_mask], 1.0 - rng.uniform(0.2, 0.6)))
+    w = smoothstep(thr, thr + 0.4, f) * crack_mask * np.float32(rng.uniform(0.6, 1.0))
+    outside = albedo[~crack_mask].mean(axis=0) if (~crack_mask).any() else albedo.reshape(-1, 3).mean(axis=0)
+    dust = (outside * rng.uniform(0.6, 1.0) * np.asarray([1.0, 0.95, 0.85])).astype(np.float32)
+    albedo += w[..., None] * (dust - albedo)
+    roughness += w * (np.float32(1.0) - roughness)
+    height += w * crack_depth * np.float32(rng.uniform(0.3, 0.8))
+
+
+def _crack_spall(rng: np.random.Generator, grid: TexGrid, crack_mask, albedo, roughness, height) -> None:
+    """Chipped crack edges: small dents just outside the crack border (texture only, unlabelled)."""
+    t = np.float32(grid.texel_m)
+    d = cv2.distanceTransform((~crack_mask).astype(np.uint8), cv2.DIST_L2, 5) * t
+    reach = np.float32(rng.uniform(0.002, 0.006)) * (1.0 + 0.6 * grid.field(_seed(rng), 0.01, 2))
+    sel = grid.field(_seed(rng), rng.uniform(0.01, 0.03), 2)
+    thr = quantile_fast(sel, 1.0 - rng.uniform(0.2, 0.5))
+    w = smoothstep(reach + t, reach, d) * smoothstep(thr, thr + 0.3, sel) * ~crack_mask
+    slope = np.clip(1.0 - d / np.maximum(reach, t), 0.0, 1.0)
+    height -= w * slope * np.float32(rng.uniform(0.001, 0.004))
+    albedo *= (1.0 - w * np.float32(rng.uniform(0.15, 0.4)))[..., None]
+    roughness += w * (np.float32(0.95) - roughness)
 
 
 # ----------------------------------------------------------------------------- family parts

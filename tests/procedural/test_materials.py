@@ -246,3 +246,88 @@ def test_save_preview_writes_png(tmp_path, cm):
     p = save_preview(m, tmp_path / "prev.png")
     img = cv2.imread(str(p))
     assert img.shape == (64, 4 * 64, 3)
+
+
+# ---- issue 9: defaults unchanged, crack cavity, dirt, spall ------------------------------------
+
+# sha256[:20] of albedo + roughness bytes at the base commit d227a01 (before clutter, cavity,
+# dirt, spall and the photo family existed), for the spec in test_defaults_leave_maps_byte_identical.
+BASE_HASHES = {
+    "asphalt": "208f05ecabbcd9ef0a38", "concrete": "0c79d0f93bdc8ff2abbc", "masonry": "9f52ff875d87375fe209",
+    "steel": "a89ba418e23dc20b3a8c", "blockwork": "36e5b6c3d65e4208363f",
+}
+
+
+@pytest.mark.parametrize("family", sorted(BASE_HASHES))
+def test_defaults_leave_maps_byte_identical(family):
+    import hashlib
+    from types import SimpleNamespace
+
+    flat = SimpleNamespace(mask=np.zeros((64, 64), bool), depth_m=np.zeros((64, 64), np.float32), size_m=1.5)
+    s = MaterialSpec(family=family, seed=11, texture_px=64, hue_shift=0.02, value_scale=1.1, roughness_offset=-0.05,
+                     crack_darkening=0.3, crack_roughness=0.9,
+                     distractors=[DistractorSpec("stain", 5), DistractorSpec("joint", 6)])
+    m = material_maps(s, flat)
+    assert hashlib.sha256(m.albedo.tobytes() + m.roughness.tobytes()).hexdigest()[:20] == BASE_HASHES[family]
+    assert not m.clutter_mask.any() and m.photo == ""
+
+
+def test_old_spec_json_loads_and_renders_as_today(cm):
+    from crackgen.config.spec import SampleSpec
+
+    spec = make_spec(Recipe.model_validate({"material": {"texture_px": 64}}), 4)
+    d = spec.to_dict()
+    for k in ("crack_cavity", "crack_dirt", "crack_spall", "crack_seed", "photo_folder", "photo_fraction",
+              "photo_size_m", "photo_clean", "clutter"):
+        d["material"].pop(k)
+    old = SampleSpec.from_dict(d).material  # a spec written before issue 9
+    a, b = material_maps(old, cm), material_maps(spec.material, cm)
+    for f in ("albedo", "roughness", "height_m", "normal"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f))
+
+
+def groove(px=64, size_m=0.064, half_w_m=0.003, depth_m=0.01):
+    """Hand-made straight V-groove along u: 1 mm texels, 6 mm wide, 10 mm deep at the centre."""
+    from types import SimpleNamespace
+
+    v = (np.arange(px) + 0.5) * size_m / px - size_m / 2
+    dist = np.abs(v)[:, None] * np.ones((1, px))
+    depth = np.clip(1 - dist / half_w_m, 0, 1).astype(np.float32) * depth_m
+    return SimpleNamespace(mask=depth > 0, depth_m=depth, size_m=size_m), dist
+
+
+def test_cavity_darkens_crack_centres_more_than_edges():
+    g, dist = groove()
+    plain = material_maps(mspec("concrete", px=64), g)
+    cav = material_maps(mspec("concrete", px=64, crack_cavity=1.0), g)
+    inside = g.mask
+    np.testing.assert_array_equal(cav.albedo[~inside], plain.albedo[~inside])  # only the crack changes
+    ratio = cav.albedo.mean(-1) / np.maximum(plain.albedo.mean(-1), 1e-6)
+    centre = inside & (dist < 0.001)
+    edge = inside & (dist > 0.002)
+    assert ratio[centre].mean() < 0.35  # near-black deep centre (on top of crack_darkening)
+    assert ratio[edge].mean() > ratio[centre].mean() + 0.3
+    assert np.all(ratio[inside] <= 1.0 + 1e-6)
+    half = material_maps(mspec("concrete", px=64, crack_cavity=0.5), g)
+    assert (half.albedo.mean(-1) / plain.albedo.mean(-1))[centre].mean() > ratio[centre].mean()
+
+
+def test_dirt_fills_part_of_the_crack_and_spall_chips_its_edges():
+    g, dist = groove()
+    plain = material_maps(mspec("concrete", px=64, crack_cavity=1.0), g)
+    dirt = material_maps(mspec("concrete", px=64, crack_cavity=1.0, crack_dirt=True, crack_seed=2), g)
+    inside = g.mask
+    filled = np.abs(dirt.albedo - plain.albedo).max(-1) > 1e-6
+    assert not filled[~inside].any()  # dirt lies only in the crack
+    assert 0.05 < filled[inside].mean() < 0.95  # partial
+    assert dirt.albedo[filled].mean() > plain.albedo[filled].mean()  # lighter than the cavity
+    assert dirt.height_m[filled].mean() > plain.height_m[filled].mean()  # raises the crack floor
+    sp = material_maps(mspec("concrete", px=64, crack_spall=True, crack_seed=2), g)
+    base = material_maps(mspec("concrete", px=64), g)
+    chipped = np.abs(sp.height_m - base.height_m) > 0
+    assert chipped.any() and not chipped[inside].any()  # along the border, never inside the crack
+    assert dist[chipped].max() < 0.003 + 0.012  # within the chip reach of the crack
+    assert (sp.height_m[chipped] < base.height_m[chipped]).all()
+    np.testing.assert_array_equal(sp.crack_mask, base.crack_mask)  # unlabelled
+    np.testing.assert_array_equal(
+        material_maps(mspec("concrete", px=64, crack_spall=True, crack_seed=2), g).height_m, sp.height_m)
