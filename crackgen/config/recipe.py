@@ -353,8 +353,8 @@ class LabelSection(Section):
     """What the GT mask marks: the crack a person sees (visible) or the thesis mask Z < t (eq. 5.5)."""
 
     policy: Literal["visible", "thesis"] = Field("visible",
-                        description='visible (deep relative to its opening; mask_thesis.png kept too) | thesis (Z < t)')
-    depth_ratio: float = Field(1.0, ge=0, le=100,
+                        description="visible: crack deep relative to its opening (thesis mask kept as mask_thesis.png); thesis: Z < t")
+    depth_ratio: float = Field(0.5, ge=0, le=100,
                                description="visible: crack texel depth must be >= ratio x local crack half-width (unitless)")
     min_depth_m: float = Field(0.002, ge=0, le=1, description="visible: crack texel depth must also be >= this (m)")
     min_component_px: int = Field(4, ge=0, le=1_000_000,
@@ -362,7 +362,7 @@ class LabelSection(Section):
     min_contrast: float = Field(0.1, ge=0, le=1,
                                 description="crack shows if (ring - inside) / ring median luminance >= this (unitless)")
     invisible: Literal["empty", "redraw", "keep"] = Field("empty",
-                           description="crack that does not show: empty (label cleared) | redraw (new crack) | keep")
+                           description="crack that does not show: empty (label cleared), redraw (new crack) or keep")
     max_redraws: int = Field(2, ge=0, le=100, description="redraw: new cracks tried before falling back to empty")
 
 

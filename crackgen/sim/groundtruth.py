@@ -70,9 +70,8 @@ def label_texels(cfg: LabelSection, cm: CrackMap) -> np.ndarray:
                         min_depth_m=cfg.min_depth_m, skel=cm.skeleton)
 
 
-def view_label(cfg: LabelSection, cm: CrackMap, gt: ViewGroundTruth, rgb: np.ndarray, attempt: int = 0,
-               contrast_fn=label_contrast) -> ViewLabel:
-    """Label of the view ``gt`` was cast for, checked on the clean render ``rgb`` (``contrast_fn`` for tests)."""
+def view_label(cfg: LabelSection, cm: CrackMap, gt: ViewGroundTruth, rgb: np.ndarray, attempt: int = 0) -> ViewLabel:
+    """Label of the view ``gt`` was cast for, checked on the clean render ``rgb``."""
     thesis = gt.mask
     if cfg.policy == "thesis":
         label = thesis.copy()
@@ -80,7 +79,7 @@ def view_label(cfg: LabelSection, cm: CrackMap, gt: ViewGroundTruth, rgb: np.nda
         label = (mask_lookup(label_texels(cfg, cm), gt.uv) * 255).astype(np.uint8)
         label = drop_small_components(label, cfg.min_component_px)
     px = int(np.count_nonzero(label))
-    contrast = contrast_fn(rgb, label)
+    contrast = label_contrast(rgb, label)
     d = decide_label(bool(thesis.any()), px, contrast, min_contrast=cfg.min_contrast, invisible=cfg.invisible,
                      attempt=attempt, max_redraws=cfg.max_redraws)
     if d.label_emptied:
