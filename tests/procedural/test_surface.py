@@ -7,8 +7,7 @@ import pytest
 import trimesh
 
 from crackgen.config.spec import CrackSpec
-from crackgen.procedural.crackmap import crack_map
-from crackgen.procedural.crackmap import CrackMap
+from crackgen.procedural.crackmap import CrackMap, crack_map
 from crackgen.procedural.surface import (
     SurfaceError,
     centreline_depth_kept,
@@ -183,3 +182,23 @@ def test_footprint_sampling_keeps_the_depth_of_a_narrow_groove():
 def test_unknown_sampling_is_refused(cm):
     with pytest.raises(SurfaceError, match="sampling"):
         surface_vertices(cm, 8, sampling="max")
+
+
+def test_crack_slope_is_counted_once_between_mesh_and_normal_map(cm):
+    from crackgen.config.spec import MaterialSpec
+    from crackgen.procedural.materials import material_maps, resample_crack
+
+    spec = MaterialSpec(family="concrete", seed=3, texture_px=96, hue_shift=0.0, value_scale=1.0,
+                        roughness_offset=0.0, crack_darkening=0.3, crack_roughness=0.9)
+    flat = dataclasses.replace(cm, depth_m=np.zeros_like(cm.depth_m))
+    micro = material_maps(spec, flat).height_m  # the surface relief without any crack
+    _, crack_depth = resample_crack(cm, 96)
+    full = material_maps(spec, cm).height_m  # old behaviour: the normal map carries the whole crack
+    np.testing.assert_allclose(full, micro - crack_depth, atol=1e-6)
+    g = 48
+    held = mesh_depth_map(surface_vertices(cm, g), g, 96)
+    once = material_maps(spec, cm, held).height_m  # only what the mesh lacks
+    np.testing.assert_allclose(once, micro - (crack_depth - held), atol=1e-6)
+    # a mesh that holds the crack exactly leaves the normal map with the micro relief alone
+    np.testing.assert_allclose(material_maps(spec, cm, crack_depth).height_m, micro, atol=1e-6)
+    assert np.abs(once - micro).max() < np.abs(full - micro).max()
