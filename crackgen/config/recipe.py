@@ -14,7 +14,7 @@ import hashlib
 import math
 import tomllib
 from pathlib import Path
-from typing import Annotated, Any, Callable, Union
+from typing import Annotated, Any, Callable, Literal, Union
 
 import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
@@ -417,6 +417,23 @@ class CameraEffectsSection(Section):
     jpeg_quality: _t(1, 100) = _d({"min": 60.0, "max": 95.0}, "JPEG quality (1-100, rounded to an integer)")
 
 
+class LabelSection(Section):
+    """What the GT mask marks: the crack a person sees (visible) or the thesis mask Z < t (eq. 5.5)."""
+
+    policy: Literal["visible", "thesis"] = Field("visible",
+                        description="visible: crack deep relative to its opening (thesis mask kept as mask_thesis.png); thesis: Z < t")
+    depth_ratio: float = Field(0.5, ge=0, le=100,
+                               description="visible: crack texel depth must be >= ratio x local crack half-width (unitless)")
+    min_depth_m: float = Field(0.002, ge=0, le=1, description="visible: crack texel depth must also be >= this (m)")
+    min_component_px: int = Field(4, ge=0, le=1_000_000,
+                                  description="visible: drop label components smaller than this (camera px; 0 = keep all)")
+    min_contrast: float = Field(0.1, ge=0, le=1,
+                                description="crack shows if (ring - inside) / ring median luminance >= this (unitless)")
+    invisible: Literal["empty", "redraw", "keep"] = Field("empty",
+                           description="crack that does not show: empty (label cleared), redraw (new crack) or keep")
+    max_redraws: int = Field(2, ge=0, le=100, description="redraw: new cracks tried before falling back to empty")
+
+
 class Recipe(Section):
     dataset: DatasetSection = Field(default_factory=DatasetSection)
     crack: CrackSection = Field(default_factory=CrackSection)
@@ -431,6 +448,7 @@ class Recipe(Section):
     stereo: StereoSection = Field(default_factory=StereoSection)
     adapt: AdaptSection = Field(default_factory=AdaptSection)
     camera_effects: CameraEffectsSection = Field(default_factory=CameraEffectsSection)
+    label: LabelSection = Field(default_factory=LabelSection)
 
     # set by load_recipe; not part of the schema
     _text: str = ""

@@ -315,7 +315,7 @@ def local_light_power(kind: str, irradiance_w_m2: float, distance_m: float) -> f
     return float(irradiance_w_m2 * solid * distance_m**2)
 
 
-def section_rng(recipe_seed: int, index: int, section: str) -> np.random.Generator:
+def section_rng(recipe_seed: int, index: int, section: str, attempt: int = 0) -> np.random.Generator:
     """The Generator that section ``section`` of sample ``index`` draws from.
 
     It is the child of the sample's root ``SeedSequence([recipe_seed, index])`` keyed by the
@@ -323,10 +323,19 @@ def section_rng(recipe_seed: int, index: int, section: str) -> np.random.Generat
     ``root.spawn(n + 1)[n]``. Keying by a fixed number, rather than spawning a list as long as
     today's sections, makes each stream depend on nothing but its own number: a section can be
     drawn alone, in any order, and appending a section to the table leaves the others untouched.
+
+    ``attempt`` >= 1 re-keys the crack stream only (``spawn_key=(0, attempt)``): a sample whose
+    crack does not show is redrawn ([label] invisible = "redraw") with a new, deterministic crack
+    and everything else unchanged. Attempt 0 is the original stream, byte for byte.
     """
     if section not in SECTION_STREAMS:
         raise ValueError(f"section_rng: unknown section {section!r}; known: {', '.join(SECTION_STREAMS)}")
-    seq = np.random.SeedSequence([int(recipe_seed), int(index)], spawn_key=(SECTION_STREAMS[section],))
+    if int(attempt) < 0:
+        raise ValueError(f"section_rng: attempt must be >= 0, got {attempt!r}")
+    key: tuple[int, ...] = (SECTION_STREAMS[section],)
+    if section == "crack" and int(attempt) > 0:
+        key = (SECTION_STREAMS[section], int(attempt))
+    seq = np.random.SeedSequence([int(recipe_seed), int(index)], spawn_key=key)
     return np.random.default_rng(seq)
 
 
@@ -562,13 +571,15 @@ def draw_camera_effects(c: CameraEffectsSection, rng: np.random.Generator) -> Ca
     return spec
 
 
-def make_spec(recipe: Recipe, index: int) -> SampleSpec:
-    """Draw every random parameter of sample ``index`` of ``recipe``, each section from its own stream."""
+def make_spec(recipe: Recipe, index: int, attempt: int = 0) -> SampleSpec:
+    """Draw every random parameter of sample ``index`` of ``recipe``, each section from its own stream.
+
+    ``attempt`` > 0 redraws the crack only (see ``section_rng``); 0 is the sample as first drawn."""
     if not isinstance(recipe, Recipe):
         raise TypeError(f"make_spec: recipe must be a Recipe, got {type(recipe).__name__}")
 
     def rng(section: str) -> np.random.Generator:
-        return section_rng(recipe.dataset.seed, index, section)
+        return section_rng(recipe.dataset.seed, index, section, attempt)
 
     s = recipe.surface
     li = recipe.lights

@@ -14,6 +14,8 @@ pixel-filter footprint, so at crack walls it is not the pixel-centre depth, and 
 mask would otherwise need a second render. The Blender depth pass is still compared
 with the ray-cast depth per sample and its agreement (median |difference|) is stored
 in the metadata as a cheap, always-on check that renderer and ray caster agree.
+``mask.png`` is the ``[label]`` policy's label (visible crack by default; the thesis
+mask then goes to ``mask_thesis.png``), checked against the clean render.
 """
 from __future__ import annotations
 
@@ -35,8 +37,8 @@ from crackgen.postrender.targets import TargetPhotos
 from crackgen.procedural.crackmap import crack_map
 from crackgen.procedural.materials import material_maps
 from crackgen.procedural.shadow_pattern import shadow_alpha
-from crackgen.procedural.surface import surface_faces, surface_uvs, surface_vertices
-from crackgen.sim.groundtruth import view_ground_truth
+from crackgen.procedural.surface import mesh_depth_map, surface_faces, surface_uvs, surface_vertices
+from crackgen.sim.groundtruth import view_ground_truth, view_label
 from crackgen.sim.raycast import MeshRaycaster
 from crackgen.sim.rig import make_rig
 from crackgen.sim.sensors import sensor_rng
@@ -137,10 +139,22 @@ class SampleProducer:
 
     # ---- one sample
     def make(self, index: int) -> Sample:
-        """Run every stage for sample ``index``; raises ``PipelineError`` naming the stage."""
+        """Run every stage for sample ``index``; raises ``PipelineError`` naming the stage.
+
+        With ``[label] invisible = "redraw"``, a sample whose crack does not show is made again
+        with a new crack (``make_spec(..., attempt)``), at most ``max_redraws`` times."""
         tm = _Timer(index)
+        attempt = 0
+        while True:
+            sample = self._make(index, attempt, tm)
+            if sample is not None:
+                return sample
+            attempt += 1
+
+    def _make(self, index: int, attempt: int, tm: _Timer) -> Sample | None:
+        """One try at sample ``index``; None when its crack does not show and is to be redrawn."""
         with tm.stage("spec"):
-            spec: SampleSpec = make_spec(self.recipe, index)
+            spec: SampleSpec = make_spec(self.recipe, index, attempt)
             rig = make_rig(spec)
         with tm.stage("crackmap"):
             cm = crack_map(spec.crack, size_px=spec.surface.crackmap_px, size_m=spec.surface.size_m)
@@ -148,7 +162,8 @@ class SampleProducer:
             g = spec.surface.grid_px
             vertices = surface_vertices(cm, g)
         with tm.stage("materials"):
-            maps = material_maps(spec.material, cm)
+            # the normal map carries only the crack depth the mesh cannot hold: the slope counts once
+            maps = material_maps(spec.material, cm, mesh_depth_map(vertices, g, spec.material.texture_px))
         with tm.stage("shadow"):
             alpha = shadow_alpha(spec.shadow, SHADOW_PX) if spec.shadow.enabled else None
         scene = self.scene
@@ -165,12 +180,17 @@ class SampleProducer:
             caster = MeshRaycaster(vertices, np.asarray(surface_faces(g)), np.asarray(surface_uvs(g)))
         with tm.stage("groundtruth"):
             gt = view_ground_truth(rig.rgb, caster, cm.mask)
+            label = view_label(self.recipe.label, cm, gt, out.rgb, attempt)
+        if label.redraw:
+            return None
         members: dict[str, Any] = {
             "rgb.png": out.rgb,
-            "mask.png": gt.mask,
+            "mask.png": label.mask,
             "depth.exr": gt.depth,
             "crackmap.exr": cm.depth_m,
         }
+        if self.recipe.label.policy != "thesis":  # both labels on the same render, to compare
+            members["mask_thesis.png"] = label.thesis
         sensors: dict[str, Any] = {}
         tof = None
         if spec.tof.enabled:
@@ -221,8 +241,9 @@ class SampleProducer:
             "crack": {
                 "length_m": None if not np.isfinite(cm.length_m) else float(cm.length_m),
                 "surface_coverage": cm.coverage,
-                "pixel_fraction": crack_pixel_fraction(gt.mask),
+                "pixel_fraction": crack_pixel_fraction(label.mask),
             },
+            "label": label.meta,
             "material": {"family": spec.material.family, "distractors": [d.kind for d in spec.material.distractors],
                          "clutter": [c.kind for c in spec.material.clutter], "photo": maps.photo},
             "lights": [{"kind": L.kind, "elevation_deg": float(np.degrees(L.elevation_rad))} for L in spec.lights],

@@ -233,7 +233,7 @@ class MaterialMaps:
     albedo: np.ndarray  # (T,T,3) float32 linear RGB in [0, 1]
     roughness: np.ndarray  # (T,T) float32 in [0, 1]
     normal: np.ndarray  # (T,T,3) float32 tangent-space normal encoded (n + 1) / 2, +Y = +v (OpenGL)
-    height_m: np.ndarray  # (T,T) float32 micro height (m) the normal map is derived from, crack depth included
+    height_m: np.ndarray  # (T,T) float32 micro height (m) the normal map is derived from, plus crack depth the mesh lacks
     distractor_mask: np.ndarray  # (T,T) bool where distractors were painted (GT mask stays empty there)
     crack_mask: np.ndarray  # (T,T) bool crack map mask resampled (nearest) to T
     clutter_mask: np.ndarray | None = None  # (T,T) bool where clutter was painted (never labelled)
@@ -278,8 +278,12 @@ def normal_from_height(height_m: np.ndarray, texel_m: float) -> np.ndarray:
     return n * 0.5 + 0.5
 
 
-def material_maps(spec: MaterialSpec, cm: CrackMapLike) -> MaterialMaps:
-    """Albedo, roughness, normal and height maps for ``spec`` over the crack map's patch."""
+def material_maps(spec: MaterialSpec, cm: CrackMapLike, mesh_depth_m: np.ndarray | None = None) -> MaterialMaps:
+    """Albedo, roughness, normal and height maps for ``spec`` over the crack map's patch.
+
+    ``mesh_depth_m`` (T, T): the crack depth the displaced mesh already holds at each texel
+    (``surface.mesh_depth_map``). Given, the height (and so the normal map) carries only the
+    rest, crack depth - mesh depth, so the crack slope is shaded once; None = all of it."""
     fam = load_family(spec.family)
     for k, d in enumerate(spec.distractors):
         if d.kind not in DISTRACTORS:
@@ -335,7 +339,9 @@ def material_maps(spec: MaterialSpec, cm: CrackMapLike) -> MaterialMaps:
     albedo[idx] *= dark[:, None]
     roughness[idx] = spec.crack_roughness
     crack_interior(spec, grid, crack_mask, crack_depth, albedo, roughness, height)
-    height -= crack_depth
+    if mesh_depth_m is not None and np.shape(mesh_depth_m) != crack_depth.shape:
+        raise MaterialError(f"mesh_depth_m must have shape {crack_depth.shape}, got {np.shape(mesh_depth_m)}")
+    height -= crack_depth if mesh_depth_m is None else crack_depth - np.asarray(mesh_depth_m, np.float32)
 
     clip01(albedo)
     clip01(roughness)

@@ -71,7 +71,9 @@ class Member:
 
 _ALL = (
     Member("rgb", Codec.PNG_RGB, True, doc="rendered RGB"),
-    Member("mask", Codec.PNG_MASK, True, doc="GT crack mask (0/255)"),
+    Member("mask", Codec.PNG_MASK, True, doc="GT crack label (0/255), the [label] policy's (visible crack by default)"),
+    Member("mask_thesis", Codec.PNG_MASK, True,
+           doc="thesis GT mask Z < t (eq. 5.5, 0/255); optional, written when [label] policy = visible"),
     Member("depth", Codec.EXR_FLOAT, True, doc="dense GT planar depth (m)"),
     Member("tof", Codec.EXR_FLOAT, True, doc="sparse ToF depth projected into the RGB view (m, -1 none)"),
     Member("tofraw", Codec.EXR_CHANNELS, False, channels=("Z", "A"),

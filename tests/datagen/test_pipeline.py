@@ -28,7 +28,7 @@ def produced():
 def test_members_follow_the_contract(produced):
     _, samples, _ = produced
     m = samples[0].members
-    assert set(m) == {"rgb.png", "mask.png", "depth.exr", "crackmap.exr", "tof.exr", "tofraw.exr", "lidar.exr",
+    assert set(m) == {"rgb.png", "mask.png", "mask_thesis.png", "depth.exr", "crackmap.exr", "tof.exr", "tofraw.exr", "lidar.exr",
                       "right.png", "disp_sgm.exr", "disp_gt.exr", "disp_tof.exr", "tofamp.exr"}
     assert m["rgb.png"].shape == (60, 80, 3) and m["rgb.png"].dtype == np.uint8
     assert m["right.png"].shape == (60, 80, 3)

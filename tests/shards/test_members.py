@@ -36,7 +36,7 @@ def value_for(kind, rng: np.random.Generator):
 
 
 def test_registry_names_are_keyable_and_filenames_resolve_back():
-    assert list(MEMBERS) == ["rgb", "mask", "depth", "tof", "tofraw", "lidar", "right", "disp_sgm",
+    assert list(MEMBERS) == ["rgb", "mask", "mask_thesis", "depth", "tof", "tofraw", "lidar", "right", "disp_sgm",
                              "disp_gt", "disp_tof", "tofamp", "crackmap", "json"]
     for name, kind in MEMBERS.items():
         assert kind.name == name and "." not in name
