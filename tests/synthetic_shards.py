@@ -8,7 +8,7 @@ render-like statistics, sparse maps mostly -1).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -19,12 +19,19 @@ DEFAULT_MEMBERS = ("rgb.png", "mask.png", "depth.exr", "tof.exr", "json")
 
 
 def write_shards(root: Path, n_shards: int = 2, per_shard: int = 4, size_px: int = 48, tof_px: int = 16,
-                 members: Sequence[str] = DEFAULT_MEMBERS, seed: int = 1) -> Path:
-    """Write ``n_shards`` x ``per_shard`` synthetic samples under ``root`` (shard-NNNNNN.tar); returns ``root``."""
+                 members: Sequence[str] = DEFAULT_MEMBERS, seed: int = 1,
+                 extra: Mapping[str, Callable[[dict[str, Any]], Any]] | None = None) -> Path:
+    """Write ``n_shards`` x ``per_shard`` synthetic samples under ``root`` (shard-NNNNNN.tar); returns ``root``.
+
+    ``extra`` adds members made from each sample, e.g. ``{"mask_thesis.png": lambda s: ...}``.
+    """
     rng = np.random.default_rng(seed)
     for s in range(n_shards):
         with ShardWriter(root, s) as w:
             for i in range(per_shard):
                 smp = synthetic_sample(rng, size_px, tof_px)
-                w.add(sample_key(s, i), {k: smp[k] for k in members})
+                members_out = {k: smp[k] for k in members}
+                for name, make in (extra or {}).items():
+                    members_out[name] = make(smp)
+                w.add(sample_key(s, i), members_out)
     return root

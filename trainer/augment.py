@@ -13,7 +13,9 @@ on worker count or order and a resumed run sees the same images.
 
 Input channels: ``rgb`` (3), ``rgbd`` (4: RGB + depth), ``rgbdv`` (5: RGB +
 depth + valid). RGB is normalised with ImageNet mean/std; depth is in [0,1]
-(see ``trainer.depth``) with 0 where invalid; valid is 0/1.
+(``fixed``/``minmax``) or [-1,1] (``relief``: local relief in mm / range; see
+``trainer.depth``) with 0 where invalid; valid is 0/1. Relief depth gets a
+contrast change only (a brightness offset would fake a step in the surface).
 """
 from __future__ import annotations
 
@@ -25,7 +27,16 @@ import torch
 from torchvision.transforms import InterpolationMode
 from torchvision.transforms.v2 import functional as F
 
-from trainer.depth import DEFAULT_FAR_M, DEFAULT_NEAR_M, normalise_depth
+from trainer.depth import (
+    DEFAULT_FAR_M,
+    DEFAULT_NEAR_M,
+    DEFAULT_RELIEF,
+    DEFAULT_RELIEF_RANGE_MM,
+    DEFAULT_RELIEF_SIGMA,
+    DEPTH_NORMS,
+    RELIEF_METHODS,
+    normalise_depth,
+)
 from trainer.errors import TrainerInputError
 
 CHANNELS = {"rgb": 3, "rgbd": 4, "rgbdv": 5}
@@ -40,7 +51,10 @@ class SampleConfig:
     channels: str = "rgb"
     near_m: float = DEFAULT_NEAR_M
     far_m: float = DEFAULT_FAR_M
-    depth_norm: str = "fixed"
+    depth_norm: str = "fixed"  # fixed | minmax | relief (see trainer.depth)
+    relief: str = DEFAULT_RELIEF  # relief reference: lowpass | plane
+    relief_range_mm: float = DEFAULT_RELIEF_RANGE_MM  # +- this many mm map to +-1
+    relief_sigma: float = DEFAULT_RELIEF_SIGMA  # low-pass window, fraction of the shorter side
     crop: int | None = None  # training crop size (px); None = keep full image
     size: int | None = None  # resize shorter side to this before anything else (eval and train)
     # augmentation (train only)
@@ -55,6 +69,13 @@ class SampleConfig:
     def __post_init__(self) -> None:
         if self.channels not in CHANNELS:
             raise TrainerInputError(f"channels must be one of {sorted(CHANNELS)}, got {self.channels!r}")
+        if self.depth_norm not in DEPTH_NORMS:
+            raise TrainerInputError(f"--depth-norm must be one of {DEPTH_NORMS}, got {self.depth_norm!r}")
+        if self.relief not in RELIEF_METHODS:
+            raise TrainerInputError(f"--relief must be one of {RELIEF_METHODS}, got {self.relief!r}")
+        if not self.relief_range_mm > 0 or not self.relief_sigma > 0:
+            raise TrainerInputError(f"--relief-range-mm ({self.relief_range_mm}) and --relief-sigma "
+                                    f"({self.relief_sigma}) must be > 0")
 
     @property
     def in_channels(self) -> int:
@@ -114,8 +135,11 @@ def augment(rgb: torch.Tensor, aux: torch.Tensor, cfg: SampleConfig, g: torch.Ge
         b, c = _u(g, -cfg.depth_bc, cfg.depth_bc), _u(g, 1 - cfg.depth_bc, 1 + cfg.depth_bc)
         depth, valid = aux[0], aux[1] > 0.5
         if valid.any():
-            mean = depth[valid].mean()
-            new = ((depth - mean) * c + mean + b).clamp(0.0, 1.0)
+            if cfg.depth_norm == "relief":  # scale about the surface (0); no offset
+                new = (depth * c).clamp(-1.0, 1.0)
+            else:
+                mean = depth[valid].mean()
+                new = ((depth - mean) * c + mean + b).clamp(0.0, 1.0)
             aux = aux.clone()
             aux[0] = torch.where(valid, new, torch.zeros_like(depth))
     return rgb, aux
@@ -134,7 +158,8 @@ def sample_to_tensors(sample: dict[str, Any], cfg: SampleConfig, g: torch.Genera
     if cfg.channels != "rgb" and depth_m is None:
         raise TrainerInputError(f"{sample.get('path', sample.get('key'))}: model needs depth ({cfg.channels}) but the sample has none")
     if depth_m is not None and cfg.channels != "rgb":
-        d, v = normalise_depth(depth_m, cfg.near_m, cfg.far_m, cfg.depth_norm)
+        d, v = normalise_depth(depth_m, cfg.near_m, cfg.far_m, cfg.depth_norm, cfg.relief, cfg.relief_range_mm,
+                               cfg.relief_sigma)
     else:
         d = v = np.zeros((H, W), np.float32)
     mask_np = sample.get("mask")

@@ -8,17 +8,15 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 from typing import Any
 
 import torch
 from torch.utils.data import DataLoader
 
-from trainer.builders import add_data_args, real_folder, sample_config_from_args
+from trainer.builders import add_data_args, real_folder, sample_config_from_args, shard_source
 from trainer.errors import TrainerInputError
 from trainer.losses import make_loss
 from trainer.models import ARCHS, build_model
-from trainer.sources import ShardSource
 from trainer.stream import SegStream
 
 
@@ -82,7 +80,7 @@ def run_bench(args: argparse.Namespace) -> dict[str, Any]:
     cfg = sample_config_from_args(args)
     res: dict[str, Any] = {"loader": [], "model": None}
     if args.data or args.real:
-        shards = ShardSource(Path(args.data), args.depth) if args.data else None
+        shards = shard_source(args, args.data) if args.data else None
         real = real_folder(args, args.real) if args.real else None
         for w in (int(x) for x in args.workers.split(",")):
             ds = SegStream(cfg, shards, real, batch_size=1, train=True, seed=args.seed, skip_bad=args.skip_bad)

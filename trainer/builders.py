@@ -13,8 +13,15 @@ import torch
 from torch.utils.data import DataLoader
 
 from trainer.augment import SampleConfig
+from trainer.depth import (
+    DEFAULT_RELIEF,
+    DEFAULT_RELIEF_RANGE_MM,
+    DEFAULT_RELIEF_SIGMA,
+    DEPTH_NORMS,
+    RELIEF_METHODS,
+)
 from trainer.errors import TrainerInputError
-from trainer.sources import RealFolder, ShardSource, split_fraction
+from trainer.sources import DEFAULT_MASK_MEMBER, SPARSE_DEPTHS, RealFolder, ShardSource, split_fraction
 from trainer.stream import SegStream
 
 
@@ -31,26 +38,59 @@ def add_data_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--baseline-m", type=float, default=None, help="stereo baseline (m), for Z=f*B/d")
     g.add_argument("--depth", choices=("tof", "lidar", "gt", "none"), default="none",
                    help="depth input: shard member tof|lidar|depth(gt), or none for RGB-only models")
-    g.add_argument("--valid-channel", action="store_true", help="add a depth-validity channel (5-ch input)")
-    g.add_argument("--depth-near", type=float, default=0.2, help="depth (m) mapped to 0")
-    g.add_argument("--depth-far", type=float, default=5.0, help="depth (m) mapped to 1")
-    g.add_argument("--depth-norm", choices=("fixed", "minmax"), default="fixed")
+    g.add_argument("--valid-channel", action=argparse.BooleanOptionalAction, default=None,
+                   help="add a depth-validity channel (5-ch input); default: on for sparse depth "
+                        f"({'|'.join(SPARSE_DEPTHS)}), off otherwise")
+    g.add_argument("--depth-near", type=float, default=0.2, help="depth (m) mapped to 0 (fixed norm)")
+    g.add_argument("--depth-far", type=float, default=5.0, help="depth (m) mapped to 1 (fixed norm)")
+    g.add_argument("--depth-norm", choices=DEPTH_NORMS, default="fixed",
+                   help="fixed: (Z-near)/(far-near); minmax: per image; relief: height above the local "
+                        "surface in mm, clipped to +-range -> [-1, 1] (carries the crack)")
+    g.add_argument("--relief", choices=RELIEF_METHODS, default=DEFAULT_RELIEF,
+                   help="relief reference: lowpass (local planes, follows curved surfaces) or one robust plane")
+    g.add_argument("--relief-range-mm", type=float, default=DEFAULT_RELIEF_RANGE_MM,
+                   help="relief (mm) mapped to +-1; larger values clip")
+    g.add_argument("--relief-sigma", type=float, default=DEFAULT_RELIEF_SIGMA,
+                   help="lowpass window sigma as a fraction of the shorter image side")
+    g.add_argument("--mask-member", default=None,
+                   help=f"label member of synthetic shards (default {DEFAULT_MASK_MEMBER}; e.g. mask_thesis.png)")
     g.add_argument("--size", type=int, default=None, help="resize the shorter image side to this (px) first")
     g.add_argument("--skip-bad", action="store_true", help="log and skip unreadable/mismatched samples")
 
 
-def channels_from_args(args: argparse.Namespace) -> str:
+def resolve_valid_channel(args: argparse.Namespace) -> bool:
+    """``--valid-channel`` / ``--no-valid-channel``, else on for sparse depth; stored back as a bool."""
     if args.depth == "none":
         if args.valid_channel:
             raise TrainerInputError("--valid-channel needs a depth input (--depth tof|lidar|gt)")
+        args.valid_channel = False
+    elif args.valid_channel is None:
+        args.valid_channel = args.depth in SPARSE_DEPTHS
+    return bool(args.valid_channel)
+
+
+def channels_from_args(args: argparse.Namespace) -> str:
+    valid = resolve_valid_channel(args)
+    if args.depth == "none":
         return "rgb"
-    return "rgbdv" if args.valid_channel else "rgbd"
+    return "rgbdv" if valid else "rgbd"
+
+
+def mask_member(args: argparse.Namespace) -> str:
+    return getattr(args, "mask_member", None) or DEFAULT_MASK_MEMBER
+
+
+def shard_source(args: argparse.Namespace, path: str | Path, fraction: float = 0.0, split: str = "all",
+                 seed: int = 0) -> ShardSource:
+    """Synthetic shards with the run's depth member and label member."""
+    return ShardSource(Path(path), args.depth, fraction, split, seed, mask_member=mask_member(args))
 
 
 def sample_config_from_args(args: argparse.Namespace) -> SampleConfig:
     return SampleConfig(
         channels=channels_from_args(args), near_m=args.depth_near, far_m=args.depth_far,
-        depth_norm=args.depth_norm, crop=getattr(args, "crop", None), size=args.size,
+        depth_norm=args.depth_norm, relief=args.relief, relief_range_mm=args.relief_range_mm,
+        relief_sigma=args.relief_sigma, crop=getattr(args, "crop", None), size=args.size,
         rotate_deg=getattr(args, "rotate_deg", 15.0), jitter=getattr(args, "jitter", 0.3),
     )
 

@@ -16,12 +16,11 @@ from typing import Any
 import torch
 
 from trainer.augment import SampleConfig
-from trainer.builders import add_data_args, eval_loader, real_folder
+from trainer.builders import add_data_args, eval_loader, real_folder, shard_source
 from trainer.checkpoint import load_checkpoint
 from trainer.errors import TrainerInputError
 from trainer.metrics import plot_pr_curve
 from trainer.models import SegModel, build_model
-from trainer.sources import ShardSource
 from trainer.stream import SegStream
 from trainer.train import evaluate
 
@@ -52,9 +51,16 @@ def load_model(path: str | Path, device: torch.device) -> tuple[SegModel, Sample
 
 
 def _inherit_depth(args: argparse.Namespace, train_args: dict[str, Any], cfg: SampleConfig) -> None:
-    """Depth source and channel count follow the checkpoint (the model needs them)."""
+    """Depth source and channel count follow the checkpoint (the model needs them).
+
+    The normalisation (fixed/minmax/relief and its parameters) is in ``cfg``,
+    the checkpoint's sample config, so it is never taken from the command line.
+    The label member of shards follows the checkpoint unless ``--mask-member`` is given.
+    """
     args.depth = train_args.get("depth", "none") if cfg.channels != "rgb" else "none"
     args.valid_channel = cfg.channels == "rgbdv"
+    if getattr(args, "mask_member", None) is None:
+        args.mask_member = train_args.get("mask_member")
 
 
 def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
@@ -63,7 +69,7 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     _inherit_depth(args, train_args, cfg)
     if not args.data and not args.real:
         raise TrainerInputError("give evaluation data: --data SHARDS and/or --real FOLDER")
-    shards = ShardSource(Path(args.data), args.depth) if args.data else None
+    shards = shard_source(args, args.data) if args.data else None
     real = real_folder(args, args.real) if args.real else None
     ds = SegStream(cfg, shards, real, train=False, seed=args.seed, skip_bad=args.skip_bad)
     amp = device.type == "cuda"
@@ -72,7 +78,11 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     out = Path(args.out) if args.out else Path(args.checkpoint).parent / "eval"
     out.mkdir(parents=True, exist_ok=True)
     summary["checkpoint"] = str(args.checkpoint)
-    summary["data"] = {"shards": args.data, "real": args.real, "samples": len(ds)}
+    summary["data"] = {"shards": args.data, "real": args.real, "samples": len(ds),
+                       "mask_member": shards.mask_member if shards is not None else None}
+    summary["input"] = {"channels": cfg.channels, "depth": args.depth, "depth_norm": cfg.depth_norm,
+                        **({"relief": cfg.relief, "relief_range_mm": cfg.relief_range_mm,
+                            "relief_sigma": cfg.relief_sigma} if cfg.depth_norm == "relief" else {})}
     (out / "metrics.json").write_text(json.dumps(summary, indent=2))
     plot_pr_curve(hist, out / "pr_curve.png", title=f"{train_args['arch']} ({cfg.channels})")
     summary["out"] = str(out)

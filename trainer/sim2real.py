@@ -200,7 +200,9 @@ def run_sim2real(args: argparse.Namespace) -> dict[str, Any]:
     device = _device(args)
     results: dict[str, Any] = {}
     n_real = len(train_stems) if train_stems is not None else len(real_folder(args, args.real))
-    table = {"arch": args.arch, "channels": sample_config_from_args(args).channels, "max_steps": args.max_steps,
+    cfg = sample_config_from_args(args)
+    table = {"arch": args.arch, "channels": cfg.channels, "depth": args.depth, "depth_norm": cfg.depth_norm,
+             "mask_member": args.mask_member or "mask.png", "max_steps": args.max_steps,
              "batch_size": args.batch_size, "crop": args.crop, "seed": args.seed, "real_train": args.real,
              "real_train_images": n_real, "real_test": test_root, "real_test_images": len(test),
              "synthetic": args.synthetic, "target": describe_target(args, targets), "runs": results}
@@ -223,7 +225,8 @@ def describe_target(args: argparse.Namespace, targets: tuple[str, ...] | None) -
 def rows_markdown(args: argparse.Namespace, table: dict[str, Any], test_root: str, n_test: int) -> list[str]:
     lines = [f"# Sim-to-real: {args.arch}, {args.max_steps} steps, batch {args.batch_size}, crop {args.crop}, "
              f"seed {args.seed}", "",
-             f"Real test: {test_root} ({n_test} images). Metrics summed over the test set; "
+             f"Input {table['channels']} (depth {table['depth']}, {table['depth_norm']}); synthetic labels "
+             f"`{table['mask_member']}`. Real test: {test_root} ({n_test} images). Metrics summed over the test set; "
              "P/R/F1/IoU at each run's best-F1 threshold (F1 at 0.5 in the last column)."]
     if table["target"]:
         lines.append(f"Adaptation target: {table['target']}.")

@@ -33,7 +33,9 @@ from trainer.imageio import DEPTH_EXTS, IMAGE_EXTS, read_float_map, read_mask, r
 log = logging.getLogger(__name__)
 
 DEPTH_SOURCES = ("tof", "lidar", "gt", "none")
+SPARSE_DEPTHS = ("tof", "lidar")  # shard depth members with holes (-1): the validity channel is on by default
 _SHARD_MEMBER = {"tof": "tof", "lidar": "lidar", "gt": "depth"}
+DEFAULT_MASK_MEMBER = "mask.png"
 
 
 def split_fraction(names: Sequence[str], fraction: float, seed: int) -> tuple[list[str], list[str]]:
@@ -167,17 +169,23 @@ def list_shards(path: str | Path) -> list[Path]:
     return found
 
 
-def shard_keys(shard: Path) -> list[str]:
-    """Sample keys of one shard from the tar headers (no member is decoded)."""
-    keys: dict[str, None] = {}
+def shard_members(shard: Path) -> dict[str, set[str]]:
+    """Sample key -> member file names (``mask.png``) of one shard, from the tar headers only."""
+    found: dict[str, set[str]] = {}
     try:
         with tarfile.open(shard, "r:") as tf:
             for m in tf:
                 if m.isfile():
-                    keys.setdefault(m.name.rsplit("/", 1)[-1].split(".", 1)[0], None)
+                    key, _, member = m.name.rsplit("/", 1)[-1].partition(".")
+                    found.setdefault(key, set()).add(member)
     except (OSError, tarfile.TarError) as exc:
         raise TrainerInputError(f"cannot read shard {shard}: {exc}") from None
-    return list(keys)
+    return found
+
+
+def shard_keys(shard: Path) -> list[str]:
+    """Sample keys of one shard from the tar headers (no member is decoded)."""
+    return list(shard_members(shard))
 
 
 def iter_shard(shard: Path, members: Sequence[str], keys: set[str] | None = None) -> Iterator[dict[str, Any]]:
@@ -189,22 +197,36 @@ def iter_shard(shard: Path, members: Sequence[str], keys: set[str] | None = None
 
 @dataclass
 class ShardSource:
-    """Synthetic shards with a chosen depth member and a key-hash validation split."""
+    """Synthetic shards with a chosen depth member, label member and a key-hash validation split.
+
+    ``mask_member`` names the label file of each sample (``mask.png``, or e.g.
+    ``mask_thesis.png`` for the thesis eq. 5.5 mask); it is yielded as ``mask``.
+    """
 
     path: Path
     depth: str = "tof"
     val_fraction: float = 0.0
     split: str = "all"  # all | train | val
     seed: int = 0
+    mask_member: str = DEFAULT_MASK_MEMBER
     shards: list[Path] = field(default_factory=list, init=False)
     shard_keys: list[list[str]] = field(default_factory=list, init=False)
 
     def __post_init__(self) -> None:
         if self.depth not in DEPTH_SOURCES:
             raise TrainerInputError(f"--depth must be one of {DEPTH_SOURCES}, got {self.depth!r}")
+        base, _, ext = self.mask_member.partition(".")
+        if not base or ext not in ("", "png") or "/" in self.mask_member:
+            raise TrainerInputError(f"--mask-member must name a PNG label member like mask.png, got {self.mask_member!r}")
         self.shards = list_shards(self.path)
+        label = f"{self.label_key}.png"
         for s in self.shards:
-            keys = shard_keys(s)
+            members = shard_members(s)
+            lacking = [k for k, names in members.items() if label not in names]
+            if lacking:  # found from the headers, before any worker starts decoding
+                raise TrainerInputError(f"{s}: sample {lacking[0]} has no label member '{label}' "
+                                        f"({len(lacking)} of {len(members)} samples lack it; --mask-member)")
+            keys = list(members)
             if self.split != "all":
                 want_val = self.split == "val"
                 keys = [k for k in keys if key_in_val(k, self.val_fraction, self.seed) == want_val]
@@ -216,8 +238,13 @@ class ShardSource:
         return sum(map(len, self.shard_keys))
 
     @property
+    def label_key(self) -> str:
+        """Key the label member is decoded under (``mask_thesis.png`` -> ``mask_thesis``)."""
+        return self.mask_member.partition(".")[0]
+
+    @property
     def members(self) -> list[str]:
-        m = ["rgb", "mask"]
+        m = ["rgb", self.label_key]
         if self.depth != "none":
             m.append(_SHARD_MEMBER[self.depth])
         return m
@@ -232,9 +259,12 @@ class ShardSource:
                 key = s["__key__"]
                 if key not in allowed:
                     continue
-                if "rgb" not in s or "mask" not in s or (dm and dm not in s):
+                if self.label_key not in s:
+                    raise TrainerInputError(f"{shard}: sample {key} has no label member "
+                                            f"'{self.label_key}.png' (--mask-member {self.mask_member})")
+                if "rgb" not in s or (dm and dm not in s):
                     raise TrainerInputError(f"{shard}: sample {key} lacks one of {self.members}")
-                mask = np.asarray(s["mask"])
+                mask = np.asarray(s[self.label_key])
                 if mask.ndim == 3:
                     mask = mask[..., 0]
                 depth = None

@@ -33,20 +33,33 @@ from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from trainer.augment import SampleConfig
-from trainer.builders import add_data_args, describe, eval_loader, eval_stream, real_split, sample_config_from_args
+from trainer.builders import (
+    add_data_args,
+    describe,
+    eval_loader,
+    eval_stream,
+    mask_member,
+    real_split,
+    resolve_valid_channel,
+    sample_config_from_args,
+    shard_source,
+)
 from trainer.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from trainer.errors import TrainerInputError
 from trainer.losses import LOSSES, make_loss
 from trainer.metrics import ConfusionHistogram
 from trainer.models import ARCHS, build_model
 from trainer.site_adapt import SiteAdaptation, parse_band, targets_from_folder
-from trainer.sources import ShardSource
 from trainer.stream import SegStream, dist_info, mix_repeat
 
 log = logging.getLogger(__name__)
 
 # Arguments that fix the data order, augmentation and model shape: a resume must not change them.
-RESUME_FIXED_ARGS = ("arch", "depth", "valid_channel", "seed", "batch_size", "workers")
+RESUME_FIXED_ARGS = ("arch", "depth", "valid_channel", "depth_norm", "relief", "mask_member", "seed", "batch_size",
+                     "workers")
+# How depth becomes the input channels: --test-only takes them from the checkpoint, as evaluate/predict do.
+DEPTH_INPUT_ARGS = ("depth", "valid_channel", "depth_near", "depth_far", "depth_norm", "relief", "relief_range_mm",
+                    "relief_sigma")
 
 
 def add_seg_args(p: argparse.ArgumentParser) -> None:
@@ -180,7 +193,13 @@ def load_resume_checkpoint(args: argparse.Namespace) -> dict[str, Any] | None:
         return None
     ckpt = load_checkpoint(args.resume)
     if args.test_only:
+        for k in DEPTH_INPUT_ARGS:
+            if k in ckpt["args"]:
+                setattr(args, k, ckpt["args"][k])
         return ckpt
+    if args.valid_channel is None and "valid_channel" in ckpt["args"]:
+        args.valid_channel = ckpt["args"]["valid_channel"]
+    resolve_valid_channel(args)
     for k in RESUME_FIXED_ARGS:
         if k in ckpt["args"] and ckpt["args"][k] != getattr(args, k):
             raise TrainerInputError(f"--{k.replace('_', '-')} {getattr(args, k)!r} differs from the checkpoint's "
@@ -196,14 +215,14 @@ def build_datasets(args: argparse.Namespace) -> tuple[SegStream, SegStream | Non
     frac = args.val_fraction
     syn = val_syn = None
     if args.data:
-        syn = ShardSource(Path(args.data), args.depth, frac, "train" if frac > 0 else "all", args.split_seed)
+        syn = shard_source(args, args.data, frac, "train" if frac > 0 else "all", args.split_seed)
         if frac > 0:
-            val_syn = ShardSource(Path(args.data), args.depth, frac, "val", args.split_seed)
+            val_syn = shard_source(args, args.data, frac, "val", args.split_seed)
     real = val_real = None
     if args.real:
         real, val_real = real_split(args, args.real, frac, args.split_seed, getattr(args, "real_stems", None))
     if args.val_data:
-        val_syn = ShardSource(Path(args.val_data), args.depth)
+        val_syn = shard_source(args, args.val_data)
     if args.val_real:
         val_real = real_split(args, args.val_real, 0.0, 0)[0]
     repeat = args.real_repeat or (mix_repeat(len(real), len(syn)) if (real is not None and syn is not None) else 1)
@@ -441,6 +460,7 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
         out.mkdir(parents=True, exist_ok=True)
     if args.crop == 0:
         args.crop = None
+    args.mask_member = mask_member(args)  # stored resolved in the checkpoint
     ckpt = load_resume_checkpoint(args)
     train_ds, val_ds = build_datasets(args)
     model, bare = build_network(args, train_ds.cfg.in_channels, device, distributed)
@@ -461,8 +481,12 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
     if args.test_only:
         return run_test_only(run, val_ds, state)
     if main_proc:
-        log.info("training %s on %s, %d steps/epoch, %d steps total, device %s",
-                 args.arch, describe(train_ds), spe, total, device)
+        c = train_ds.cfg
+        depth_in = "none" if c.channels == "rgb" else (
+            f"{args.depth} {c.depth_norm}" + (f" ({c.relief}, +-{c.relief_range_mm:g} mm)" if c.depth_norm == "relief"
+                                             else "") + (" + validity" if c.channels == "rgbdv" else ""))
+        log.info("training %s on %s (labels %s, depth %s), %d steps/epoch, %d steps total, device %s",
+                 args.arch, describe(train_ds), args.mask_member, depth_in, spe, total, device)
     t0 = time.perf_counter()
     try:
         fit(run, train_ds, val_ds, state)
