@@ -32,7 +32,7 @@ from crackgen.errors import CrackgenError
 from crackgen.procedural.crack_shapes.fracture import fracture_paths
 from crackgen.procedural.crack_shapes.hairline import DEPTH_SCALE, hairline_width_m
 from crackgen.procedural.crack_shapes.network import network_paths
-from crackgen.procedural.crack_shapes.paths import render_paths, to_texels
+from crackgen.procedural.crack_shapes.paths import MIN_HALF_WIDTH_PX, render_paths, to_texels
 from crackgen.procedural.noise import fbm
 from fusion.crack_length import crack_length, skeleton
 
@@ -153,10 +153,10 @@ def _path_layers(spec: CrackSpec, n: int, size_m: float, pixel_m: float | None) 
     if spec.shape == "network":
         paths = network_paths(spec, 0.5 * spec.width_m / size_m, rng)
     elif spec.shape == "fracture":
-        paths = fracture_paths(spec, 0.5 * spec.width_m / size_m, rng)
+        paths = fracture_paths(spec, 0.5 * spec.width_m / size_m, rng, MIN_HALF_WIDTH_PX / n)
     else:  # hairline; narrower than a texel -> widened to one texel by render_paths
         width_m = hairline_width_m(spec, pixel_m if pixel_m is not None else size_m / n)
-        paths = fracture_paths(spec, 0.5 * width_m / size_m, rng)
+        paths = fracture_paths(spec, 0.5 * width_m / size_m, rng, MIN_HALF_WIDTH_PX / n)
         centre_depth = DEPTH_SCALE * spec.depth_m
     z = render_paths(to_texels(paths, n), n)
     mask = z < np.float32(1.0)
