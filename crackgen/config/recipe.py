@@ -177,6 +177,7 @@ def _d(default: Any, doc: str) -> Any:
 
 FAMILIES = ("asphalt", "concrete", "masonry", "steel", "blockwork", "photo")  # = blender_assets/materials/*.toml
 CLUTTER_KINDS = ("pores", "gaps", "stains", "moss", "patch")  # = crackgen.procedural.clutter.CLUTTER
+SHAPES = ("fbm", "fracture", "network", "hairline")  # = crackgen.procedural.crack_shapes
 
 
 class DatasetSection(Section):
@@ -194,6 +195,19 @@ class CrackSection(Section):
     lacunarity: _t(1, 4, lo_open=True) = _d({"min": 1.9, "max": 2.2}, "fBm lacunarity L (frequency ratio per octave)")
     threshold: _t(0, 1, lo_open=True) = _d({"min": 0.015, "max": 0.04}, "mask = Z < threshold; sets crack width (unitless)")
     depth_m: _t(0, 0.2) = _d({"min": 0.004, "max": 0.015}, "crack depth (m) at the crack centre line")
+    probability: float = Field(1.0, ge=0, le=1, description="chance that a sample has a crack at all; the rest are crack-free (fraction)")
+    shape: _c(*SHAPES) = _d({"choices": ["fbm"]}, "crack shape family per sample: fbm (thesis), fracture, network or hairline")
+    width_m: _t(0, 0.5, lo_open=True) = _d(
+        {"min": 0.002, "max": 0.012}, "fracture/network: full crack width at its widest point (m)"
+    )
+    count: _t(1, 16, integer=True) = _d({"choices": [1, 2, 3], "weights": [0.5, 0.35, 0.15]}, "fracture/hairline: main cracks per patch (integer)")
+    branches: _t(0, 16, integer=True) = _d({"choices": [0, 1, 2, 3]}, "fracture/hairline: side branches per main crack (integer)")
+    jaggedness: _t(0, 1) = _d(
+        {"min": 0.08, "max": 0.2}, "path roughness: midpoint displacement s.d. / segment length, every octave (unitless)"
+    )
+    cells: _t(2, 200, integer=True) = _d({"choices": [6, 8, 10, 12, 16, 20]}, "network: Voronoi cells per patch (integer)")
+    gaps: _t(0, 0.9) = _d({"min": 0.1, "max": 0.3}, "network: fraction of cell boundaries left uncracked")
+    hairline_px: _t(0.5, 4) = _d({"min": 1.0, "max": 2.0}, "hairline: full width in camera pixels at the look-at point (px)")
 
 
 class SurfaceSection(Section):

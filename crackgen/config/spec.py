@@ -60,6 +60,17 @@ class CrackSpec:
     noise_seed: int  # OpenSimplex seed
     offset_u: float  # random offset of the noise domain, noise units
     offset_v: float
+    # Shape family and crack-free share (issue 9); defaults = the thesis fbm map, so old spec JSON loads.
+    present: bool = True  # False: crack-free sample (empty map)
+    shape: str = "fbm"  # fbm | fracture | network | hairline (crackgen.procedural.crack_shapes)
+    shape_seed: int = 0  # seeds the fracture/network/hairline path generator
+    width_m: float = 0.0  # fracture/network: full width at the widest point (m)
+    count: int = 1  # fracture/hairline: main cracks
+    branches: int = 0  # fracture/hairline: side branches per main crack
+    jaggedness: float = 0.0  # midpoint-displacement s.d. / segment length
+    cells: int = 0  # network: Voronoi cells
+    gaps: float = 0.0  # network: fraction of boundaries left uncracked
+    hairline_px: float = 1.5  # hairline: full width in camera pixels
 
 
 @dataclass
@@ -315,6 +326,12 @@ def local_light_power(kind: str, irradiance_w_m2: float, distance_m: float) -> f
     return float(irradiance_w_m2 * solid * distance_m**2)
 
 
+def pixel_footprint_m(camera: CameraSpec) -> float:
+    """Side (m) of one camera pixel on the surface at the look-at point, fronto-parallel:
+    distance * sensor_width / (focal * width_px). Hairline widths are set in these pixels."""
+    return float(camera.distance_m * camera.sensor_width_mm / (camera.focal_mm * camera.width_px))
+
+
 def section_rng(recipe_seed: int, index: int, section: str, attempt: int = 0) -> np.random.Generator:
     """The Generator that section ``section`` of sample ``index`` draws from.
 
@@ -357,6 +374,18 @@ def _crack(recipe: Recipe, rng: np.random.Generator) -> CrackSpec:
         noise_seed=_seed(rng),
         offset_u=float(rng.uniform(-1000.0, 1000.0)),
         offset_v=float(rng.uniform(-1000.0, 1000.0)),
+        # Appended after the thesis draws and always made (whatever the family), so the draws
+        # above, and so every fbm map, stay byte-identical for existing recipes.
+        present=bool(rng.random() < c.probability),
+        shape=str(c.shape.draw(rng)),
+        shape_seed=_seed(rng),
+        width_m=c.width_m.draw(rng),
+        count=int(c.count.draw(rng)),
+        branches=int(c.branches.draw(rng)),
+        jaggedness=c.jaggedness.draw(rng),
+        cells=int(c.cells.draw(rng)),
+        gaps=c.gaps.draw(rng),
+        hairline_px=c.hairline_px.draw(rng),
     )
 
 

@@ -30,7 +30,7 @@ import numpy as np
 
 import crackgen
 from crackgen.config.recipe import Recipe
-from crackgen.config.spec import SampleSpec, make_spec
+from crackgen.config.spec import SampleSpec, make_spec, pixel_footprint_m
 from crackgen.errors import CrackgenError
 from crackgen.postrender.stage import adapt_members, camera_effects_members
 from crackgen.postrender.targets import TargetPhotos
@@ -157,7 +157,12 @@ class SampleProducer:
             spec: SampleSpec = make_spec(self.recipe, index, attempt)
             rig = make_rig(spec)
         with tm.stage("crackmap"):
-            cm = crack_map(spec.crack, size_px=spec.surface.crackmap_px, size_m=spec.surface.size_m)
+            cm = crack_map(
+                spec.crack,
+                size_px=spec.surface.crackmap_px,
+                size_m=spec.surface.size_m,
+                pixel_m=pixel_footprint_m(spec.camera),
+            )
         with tm.stage("surface"):
             g = spec.surface.grid_px
             vertices = surface_vertices(cm, g)
@@ -239,6 +244,8 @@ class SampleProducer:
                 "lidar": spec.lidar.seed,
             },
             "crack": {
+                "shape": spec.crack.shape,
+                "present": bool(spec.crack.present),
                 "length_m": None if not np.isfinite(cm.length_m) else float(cm.length_m),
                 "surface_coverage": cm.coverage,
                 "pixel_fraction": crack_pixel_fraction(label.mask),
