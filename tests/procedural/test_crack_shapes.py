@@ -232,3 +232,20 @@ def test_pixel_footprint():
                      focal_mm=36.0, sensor_width_mm=36.0, cx_offset_px=0.0, cy_offset_px=0.0, target_x_m=0.0,
                      target_y_m=0.0, baseline_m=0.0)  # fmt: skip
     assert pixel_footprint_m(cam) == pytest.approx(0.002)  # 2 m * 36 mm / (36 mm * 1000 px)
+
+
+def test_main_crack_cut_to_its_tips_is_dropped_not_nan():
+    """Regression: closeup.toml samples 291 and 324 cut a second main crack down to two points
+    (both tips), whose width profile was 0/0 = NaN and failed the sample."""
+    from crackgen.config.recipe import load_recipe
+    from crackgen.config.spec import make_spec, pixel_footprint_m
+    from crackgen.procedural.crack_shapes.fracture import main_profile
+
+    assert np.array_equal(main_profile(np.array([0.0, 1.0]), np.random.default_rng(0)), [0.0, 0.0])
+    import pathlib
+
+    recipe = load_recipe(pathlib.Path(__file__).resolve().parents[2] / "recipes" / "closeup.toml")
+    for index in (291, 324):
+        s = make_spec(recipe, index)
+        cm = crack_map(s.crack, 512, s.surface.size_m, pixel_m=pixel_footprint_m(s.camera), measure=False)
+        assert np.isfinite(cm.depth_m).all() and cm.mask.any()

@@ -63,7 +63,8 @@ def main_profile(s: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Relative half-width along a main crack (max exactly 1, 0 at both tips)."""
     base = np.sqrt(np.clip(4.0 * s * (1.0 - s), 0.0, 1.0))
     prof = base * smooth_wobble(s, rng, 0.2)
-    return prof / prof.max()
+    peak = prof.max()  # 0 for a path cut down to its two end points (both tips): no crack
+    return prof / peak if peak > 0 else np.zeros_like(prof)
 
 
 def _first(hit: np.ndarray) -> int | None:
@@ -120,6 +121,8 @@ def fracture_paths(
     direction = rng.uniform(0.0, np.pi)  # the patch's main crack direction
     for _ in range(max(1, spec.count)):
         main = _main(spec, direction, half_width, gap, occ, rng)
+        if not main.half_width.any():  # cut short to nothing by an earlier crack: no crack, no branches
+            continue
         occ.add(main.xy)
         paths.append(main)
         for _ in range(max(0, spec.branches)):
