@@ -33,6 +33,7 @@ from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from trainer.augment import SampleConfig
+from trainer.bn_adapt import recompute_bn_stats
 from trainer.builders import (
     add_data_args,
     describe,
@@ -93,6 +94,10 @@ def add_seg_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resume", default=None, help="checkpoint to continue from")
     p.add_argument("--init", default=None, metavar="CKPT",
                    help="start from this checkpoint's weights (e.g. synthetic pretraining), fresh optimizer and steps")
+    p.add_argument("--init-bn", choices=("recompute", "keep"), default="recompute",
+                   help="with --init: re-estimate BatchNorm statistics on this run's training data first (AdaBN), "
+                        "or keep the checkpoint's")
+    p.add_argument("--init-bn-batches", type=int, default=50, help="batches for --init-bn recompute")
     g = p.add_argument_group("site adaptation of synthetic RGB toward unlabeled photos (training only)")
     g.add_argument("--adapt-target", default=None, metavar="FOLDER", help="folder of unlabeled target photos")
     g.add_argument("--adapt-methods", default="fourier,reinhard,histogram", help="methods drawn uniformly per sample")
@@ -254,6 +259,17 @@ def load_init_weights(path: str, bare: torch.nn.Module, args: argparse.Namespace
     except RuntimeError as exc:
         first = str(exc).strip().splitlines()[0]
         raise TrainerInputError(f"--init {path}: weights do not fit this model ({first})") from None
+
+
+def recompute_init_bn(args: argparse.Namespace, train_ds: SegStream, model: torch.nn.Module,
+                      device: torch.device) -> int:
+    """AdaBN before a fine-tune (see ``trainer.bn_adapt``): a pass over the training stream with its
+    own loader generator, so the training batches that follow are the same as without it."""
+    train_ds.set_epoch(0)
+    loader = DataLoader(train_ds, batch_size=args.batch_size, num_workers=args.workers,
+                        generator=torch.Generator().manual_seed(args.seed + 1),
+                        prefetch_factor=2 if args.workers > 0 else None)
+    return recompute_bn_stats(model, loader, device, args.init_bn_batches)
 
 
 def build_network(args: argparse.Namespace, in_channels: int, device: torch.device,
@@ -473,6 +489,10 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
     criterion = make_loss(args.loss)
     if getattr(args, "init", None) and ckpt is None:
         load_init_weights(args.init, bare, args)
+        if getattr(args, "init_bn", "recompute") == "recompute":
+            used = recompute_init_bn(args, train_ds, model, device)
+            if main_proc:
+                log.info("--init: BatchNorm statistics re-estimated on %d training batches", used)
     state = restore(ckpt, bare, opt, sched, scaler, amp, weights_only=args.test_only)
     run = Run(args=args, out=out, device=device, amp=amp, main_proc=main_proc, world=world, cfg=train_ds.cfg,
               model=model, bare=bare, optimizer=opt, lr_scheduler=sched, scaler=scaler, criterion=criterion,
