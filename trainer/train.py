@@ -33,7 +33,7 @@ from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from trainer.augment import SampleConfig
-from trainer.bn_adapt import recompute_bn_stats
+from trainer.bn_adapt import precise_bn
 from trainer.builders import (
     add_data_args,
     describe,
@@ -94,10 +94,9 @@ def add_seg_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resume", default=None, help="checkpoint to continue from")
     p.add_argument("--init", default=None, metavar="CKPT",
                    help="start from this checkpoint's weights (e.g. synthetic pretraining), fresh optimizer and steps")
-    p.add_argument("--init-bn", choices=("recompute", "keep"), default="recompute",
-                   help="with --init: re-estimate BatchNorm statistics on this run's training data first (AdaBN), "
-                        "or keep the checkpoint's")
-    p.add_argument("--init-bn-batches", type=int, default=50, help="batches for --init-bn recompute")
+    p.add_argument("--precise-bn", type=int, default=None, metavar="BATCHES",
+                   help="after training, recompute BatchNorm statistics with the final weights on this many training "
+                        "batches (default: 50 with --init, where the running statistics lag behind; else 0 = off)")
     g = p.add_argument_group("site adaptation of synthetic RGB toward unlabeled photos (training only)")
     g.add_argument("--adapt-target", default=None, metavar="FOLDER", help="folder of unlabeled target photos")
     g.add_argument("--adapt-methods", default="fourier,reinhard,histogram", help="methods drawn uniformly per sample")
@@ -261,15 +260,26 @@ def load_init_weights(path: str, bare: torch.nn.Module, args: argparse.Namespace
         raise TrainerInputError(f"--init {path}: weights do not fit this model ({first})") from None
 
 
-def recompute_init_bn(args: argparse.Namespace, train_ds: SegStream, model: torch.nn.Module,
-                      device: torch.device) -> int:
-    """AdaBN before a fine-tune (see ``trainer.bn_adapt``): a pass over the training stream with its
-    own loader generator, so the training batches that follow are the same as without it."""
-    train_ds.set_epoch(0)
-    loader = DataLoader(train_ds, batch_size=args.batch_size, num_workers=args.workers,
-                        generator=torch.Generator().manual_seed(args.seed + 1),
-                        prefetch_factor=2 if args.workers > 0 else None)
-    return recompute_bn_stats(model, loader, device, args.init_bn_batches)
+def precise_bn_batches(args: argparse.Namespace) -> int:
+    """Batches for ``--precise-bn``: given, else 50 after ``--init`` (a fine-tune) and 0 otherwise."""
+    if getattr(args, "precise_bn", None) is not None:
+        return max(0, int(args.precise_bn))
+    return 50 if getattr(args, "init", None) else 0
+
+
+def finish_precise_bn(run: Run, train_ds: SegStream, state: TrainState) -> None:
+    """Precise BN with the final weights (see ``trainer.bn_adapt``), on a fresh pass over the
+    training stream with its own loader generator; logged and stored in the checkpoint args."""
+    n = precise_bn_batches(run.args)
+    if n <= 0:
+        return
+    train_ds.set_epoch(state.epoch + 1)
+    loader = DataLoader(train_ds, batch_size=run.args.batch_size, num_workers=run.args.workers,
+                        generator=torch.Generator().manual_seed(run.args.seed + 1),
+                        prefetch_factor=2 if run.args.workers > 0 else None)
+    used = precise_bn(run.model, loader, run.device, n)
+    if run.main_proc:
+        log.info("precise BN: BatchNorm statistics recomputed with the final weights on %d training batches", used)
 
 
 def build_network(args: argparse.Namespace, in_channels: int, device: torch.device,
@@ -458,6 +468,7 @@ def fit(run: Run, train_ds: SegStream, val_ds: SegStream | None, state: TrainSta
         if run.main_proc:
             save_checkpoint(run.out / "checkpoint.pt", checkpoint_payload(run, state))
     bar.close()
+    finish_precise_bn(run, train_ds, state)
     if run.main_proc:
         save_checkpoint(run.out / "checkpoint.pt", checkpoint_payload(run, state))
         if val_ds is not None and state.best.get("f1", -1) < 0:
@@ -489,10 +500,6 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
     criterion = make_loss(args.loss)
     if getattr(args, "init", None) and ckpt is None:
         load_init_weights(args.init, bare, args)
-        if getattr(args, "init_bn", "recompute") == "recompute":
-            used = recompute_init_bn(args, train_ds, model, device)
-            if main_proc:
-                log.info("--init: BatchNorm statistics re-estimated on %d training batches", used)
     state = restore(ckpt, bare, opt, sched, scaler, amp, weights_only=args.test_only)
     run = Run(args=args, out=out, device=device, amp=amp, main_proc=main_proc, world=world, cfg=train_ds.cfg,
               model=model, bare=bare, optimizer=opt, lr_scheduler=sched, scaler=scaler, criterion=criterion,
