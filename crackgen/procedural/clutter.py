@@ -19,22 +19,12 @@ import cv2
 import numpy as np
 from numba import njit, prange
 
-from crackgen.procedural.distractors import MIN_WEIGHT
+from crackgen.procedural.distractors import _cut, _seed
 from crackgen.procedural.texgrid import TexGrid, clip01, quantile_fast, smoothstep
 
 
 def _rng(seed: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([int(seed), 0xC1A7]))
-
-
-def _seed(rng: np.random.Generator) -> int:
-    return int(rng.integers(0, 2**31 - 1))
-
-
-def _cut(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Zero negligible weights; return (weights, mask) so the mask is exact."""
-    mask = w > MIN_WEIGHT
-    return np.where(mask, w, np.float32(0.0)).astype(np.float32), mask
 
 
 @njit(cache=True, parallel=True)
