@@ -37,7 +37,7 @@ def bench_live_scene(recipe: Recipe, samples: int = 5, distinct: int = 2, shadow
     live = LiveScene(
         recipe.surface.grid_px, recipe.material.texture_px, c.width_px, c.height_px, stereo=recipe.stereo.enabled,
         threads=r.threads, device=r.device, samples=r.samples, denoise=r.denoise, max_bounces=r.max_bounces,
-        max_lights=max(8, max_lights), shadow_px=shadow_px,
+        max_lights=max(8, max_lights), shadow_px=shadow_px, persistent_data=r.persistent_data,
     )
     build_s = time.perf_counter() - t0
     proc = psutil.Process()

@@ -22,7 +22,8 @@ import os
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from typing import Any
 
 import bpy
 import numpy as np
@@ -48,6 +49,37 @@ class RenderSettings:
     max_bounces: int = 4
     seed: int = 0
     filter_width_px: float = 1.5  # Blackman-Harris pixel filter width (Blender default)
+    # issue 12 knobs, named as in [render]; defaults = Blender 4.5 factory values (= renders before them)
+    adaptive_sampling: bool = True
+    adaptive_threshold: float = 0.01
+    adaptive_min_samples: int = 0
+    denoise_prefilter: str = "accurate"
+    denoise_passes: str = "rgb_albedo_normal"
+    denoise_quality: str = "high"
+    diffuse_bounces: int = 4
+    glossy_bounces: int = 4
+    transmission_bounces: int = 12
+    transparent_bounces: int = 8
+    caustics_reflective: bool = True
+    caustics_refractive: bool = True
+    light_tree: bool = True
+    fast_gi: bool = False
+    ao_bounces: int = 1
+    clamp_direct: float = 0.0
+    clamp_indirect: float = 10.0
+    persistent_data: bool = False
+
+    @classmethod
+    def from_spec(cls, r: Any, filter_width_px: float, **override: Any) -> "RenderSettings":
+        """Settings from a ``RenderSpec`` (or anything with its attribute names)."""
+        names = [f.name for f in fields(cls) if f.name != "filter_width_px" and hasattr(r, f.name)]
+        return cls(**{**{n: getattr(r, n) for n in names}, "filter_width_px": filter_width_px, **override})
+
+
+# recipe value -> Cycles enum identifier (checked against bpy 4.5's enum items in the tests)
+PREFILTERS = {"none": "NONE", "fast": "FAST", "accurate": "ACCURATE"}
+DENOISE_PASSES = {"rgb": "RGB", "rgb_albedo": "RGB_ALBEDO", "rgb_albedo_normal": "RGB_ALBEDO_NORMAL"}
+DENOISE_QUALITY = {"high": "HIGH", "balanced": "BALANCED", "fast": "FAST"}
 
 
 def _enable_gpu() -> bool:
@@ -86,7 +118,7 @@ def select_device(scene: bpy.types.Scene, device: str) -> str:
     return "cpu"
 
 
-def configure_scene(scene: bpy.types.Scene, width: int, height: int) -> None:
+def configure_scene(scene: bpy.types.Scene, width: int, height: int, persistent_data: bool = False) -> None:
     """Once per worker: Cycles, passes, colour management, output file format."""
     scene.render.engine = "CYCLES"
     scene.render.resolution_x = int(width)
@@ -95,10 +127,12 @@ def configure_scene(scene: bpy.types.Scene, width: int, height: int) -> None:
     scene.render.pixel_aspect_x = scene.render.pixel_aspect_y = 1.0
     scene.render.use_compositing = False
     scene.render.use_sequencer = False
-    # Off on purpose: with persistent data Cycles keeps the previously uploaded image
-    # pixels after image.pixels.foreach_set (measured; update()/update_tag() do not help),
-    # and at 512 px / 16 spp it saved nothing measurable (mesh changes rebuild the BVH anyway).
-    scene.render.use_persistent_data = False
+    # Off by default: with persistent data Cycles keeps the previously uploaded pixels of an
+    # image after image.pixels.foreach_set (measured again for issue 12: update(), update_tag(),
+    # pack() do not help, reload() blanks a generated image). What works is pointing the image
+    # node at another image datablock: ``blender.images.ImageSlot`` swaps between two, so
+    # persistent_data = true is correct; whether it saves time is `crackgen bench --sweep`'s call.
+    scene.render.use_persistent_data = bool(persistent_data)
     scene.render.film_transparent = False
     scene.cycles.use_animated_seed = False
     scene.cycles.denoiser = "OPENIMAGEDENOISE"
@@ -118,14 +152,44 @@ def configure_scene(scene: bpy.types.Scene, width: int, height: int) -> None:
     s.color_mode = "RGBA"
 
 
+def _choice(table: dict[str, str], name: str, value: str) -> str:
+    if value not in table:
+        raise RenderError(f"render.{name} must be one of {', '.join(table)}, got {value!r}")
+    return table[value]
+
+
 def apply_settings(scene: bpy.types.Scene, rs: RenderSettings) -> None:
-    """Per sample (cheap property writes): samples, denoiser, threads, bounces, seed."""
+    """Per sample (cheap property writes): samples, denoiser, threads, bounces, seed, speed knobs.
+
+    ``persistent_data`` is not written here: the scene's images must be built for it
+    (``LiveScene(persistent_data=...)``), so it is set once in ``configure_scene``."""
     if rs.samples < 1:
         raise RenderError(f"render.samples must be >= 1, got {rs.samples!r}")
+    for name in ("adaptive_min_samples", "diffuse_bounces", "glossy_bounces", "transmission_bounces",
+                 "transparent_bounces", "ao_bounces", "adaptive_threshold", "clamp_direct", "clamp_indirect"):
+        if getattr(rs, name) < 0:
+            raise RenderError(f"render.{name} must be >= 0, got {getattr(rs, name)!r}")
     c = scene.cycles
     c.samples = int(rs.samples)
     c.use_denoising = bool(rs.denoise)
+    c.denoising_prefilter = _choice(PREFILTERS, "denoise_prefilter", rs.denoise_prefilter)
+    c.denoising_input_passes = _choice(DENOISE_PASSES, "denoise_passes", rs.denoise_passes)
+    c.denoising_quality = _choice(DENOISE_QUALITY, "denoise_quality", rs.denoise_quality)
+    c.use_adaptive_sampling = bool(rs.adaptive_sampling)
+    c.adaptive_threshold = float(rs.adaptive_threshold)
+    c.adaptive_min_samples = int(rs.adaptive_min_samples)
     c.max_bounces = int(rs.max_bounces)
+    c.diffuse_bounces = int(rs.diffuse_bounces)
+    c.glossy_bounces = int(rs.glossy_bounces)
+    c.transmission_bounces = int(rs.transmission_bounces)
+    c.transparent_max_bounces = int(rs.transparent_bounces)
+    c.caustics_reflective = bool(rs.caustics_reflective)
+    c.caustics_refractive = bool(rs.caustics_refractive)
+    c.use_light_tree = bool(rs.light_tree)
+    c.use_fast_gi = bool(rs.fast_gi)
+    c.ao_bounces_render = int(rs.ao_bounces)
+    c.sample_clamp_direct = float(rs.clamp_direct)
+    c.sample_clamp_indirect = float(rs.clamp_indirect)
     c.seed = int(rs.seed) % (2**31 - 1)
     c.filter_width = float(rs.filter_width_px)
     if rs.threads > 0:

@@ -62,17 +62,20 @@ class LiveScene:
         max_lights: int = 8,
         shadow_px: int = 256,
         filter_width_px: float = 1.5,
+        persistent_data: bool = False,
     ):
         bpy.ops.wm.read_factory_settings(use_empty=True)
         self.scene = bpy.context.scene
-        configure_scene(self.scene, width, height)
+        self.persistent_data = bool(persistent_data)  # images then swap between two datablocks
+        configure_scene(self.scene, width, height, self.persistent_data)
         self.device = select_device(self.scene, device)
-        self.defaults = RenderSettings(samples, denoise, threads, device, max_bounces, 0, filter_width_px)
+        self.defaults = RenderSettings(samples, denoise, threads, device, max_bounces, 0, filter_width_px,
+                                       persistent_data=self.persistent_data)
         self.filter_width_px = float(filter_width_px)  # Cycles pixel filter; public, applied at the next update()
-        self.surface = LiveSurface(self.scene, grid_px, texture_px)
+        self.surface = LiveSurface(self.scene, grid_px, texture_px, swap_images=self.persistent_data)
         self.lights = LightPool(self.scene, max_lights)
         self.sky = Sky(self.scene)
-        self.occluder = ShadowOccluder(self.scene, shadow_px)
+        self.occluder = ShadowOccluder(self.scene, shadow_px, swap_images=self.persistent_data)
         self.camera = self._camera("crackgen_rgb")
         self.right = self._camera("crackgen_right") if stereo else None
         self.renderer = Renderer(self.scene)
@@ -103,8 +106,8 @@ class LiveScene:
         ``vertices``: (grid_px^2, 3) from ``crackgen.procedural.surface.surface_vertices``; ``maps``: the
         sample's ``MaterialMaps``; ``shadow_alpha``: (shadow_px, shadow_px) from
         ``crackgen.procedural.shadow_pattern.shadow_alpha`` (ignored when ``spec.shadow.enabled`` is False).
-        Render settings (samples, denoise, threads, bounces, Cycles seed) come from
-        ``spec.render``; the device was chosen once at build.
+        Render settings (samples, denoise, threads, bounces, Cycles seed, speed knobs) come from
+        ``spec.render``; the device and persistent data were chosen once at build.
         """
         sc = self.scene
         c = spec.camera
@@ -121,7 +124,10 @@ class LiveScene:
                 raise SceneUpdateError("rig has a right camera but the LiveScene was built with stereo=False")
             apply_camera(self.right, rig.right)
         r = spec.render
-        apply_settings(sc, RenderSettings(r.samples, r.denoise, r.threads, r.device, r.max_bounces, r.seed, self.filter_width_px))
+        if bool(getattr(r, "persistent_data", False)) != self.persistent_data:
+            raise SceneUpdateError(f"spec.render.persistent_data is {r.persistent_data} but the LiveScene was built "
+                                   f"with persistent_data={self.persistent_data}")
+        apply_settings(sc, RenderSettings.from_spec(r, self.filter_width_px))
         self._has_right = rig.right is not None
         return {"device": self.device, "lights": light_meta, "occluder_matrix": None if occ is None else occ.tolist()}
 

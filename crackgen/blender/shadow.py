@@ -14,6 +14,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
+from crackgen.blender.images import ImageSlot
 from crackgen.blender.lights import frame_facing, light_direction
 from crackgen.config.spec import LightSpec, ShadowSpec
 from crackgen.errors import CrackgenError
@@ -42,7 +43,7 @@ def occluder_matrix(shadow: ShadowSpec, light: LightSpec) -> np.ndarray:
 class ShadowOccluder:
     """The occluder plane, its alpha image and material, created once."""
 
-    def __init__(self, scene: bpy.types.Scene, pattern_px: int = 256):
+    def __init__(self, scene: bpy.types.Scene, pattern_px: int = 256, swap_images: bool = False):
         self.px = int(pattern_px)
         mesh = bpy.data.meshes.new("crackgen_occluder")
         verts = [(-0.5, -0.5, 0.0), (0.5, -0.5, 0.0), (0.5, 0.5, 0.0), (-0.5, 0.5, 0.0)]
@@ -50,8 +51,8 @@ class ShadowOccluder:
         uv = mesh.uv_layers.new(name="UVMap")
         uv.data.foreach_set("uv", [0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.0, 1.0])
         mesh.update()
-        self.image = bpy.data.images.new("crackgen_occluder_alpha", self.px, self.px, alpha=False, float_buffer=True)
-        self.image.colorspace_settings.name = "Non-Color"
+        # swap_images: two alternating images, for persistent data (see crackgen.blender.images)
+        self.alpha = ImageSlot("crackgen_occluder_alpha", self.px, "Non-Color", swap_images)
         self._buf = np.ones((self.px * self.px, 4), np.float32)
         mesh.materials.append(self._material())
         obj = bpy.data.objects.new("crackgen_occluder", mesh)
@@ -71,7 +72,7 @@ class ShadowOccluder:
         nt.nodes.clear()
         out = nt.nodes.new("ShaderNodeOutputMaterial")
         tex = nt.nodes.new("ShaderNodeTexImage")
-        tex.image = self.image
+        self.alpha.attach(tex)
         tex.extension = "CLIP"  # outside the pattern nothing blocks
         tex.interpolation = "Linear"
         clear = nt.nodes.new("ShaderNodeBsdfTransparent")
@@ -95,8 +96,7 @@ class ShadowOccluder:
         if a.shape != (self.px, self.px):
             raise ShadowError(f"shadow alpha must be ({self.px}, {self.px}), got {a.shape}")
         self._buf[:, :3] = a.reshape(-1, 1)
-        self.image.pixels.foreach_set(self._buf.ravel())
-        self.image.update()
+        self.alpha.write(self._buf.ravel())
         M = occluder_matrix(shadow, lights[shadow.light_index])
         self.object.matrix_world = Matrix(M.tolist())
         self.object.hide_render = False

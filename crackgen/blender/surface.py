@@ -17,6 +17,7 @@ from typing import Protocol
 import bpy
 import numpy as np
 
+from crackgen.blender.images import ImageSlot
 from crackgen.errors import CrackgenError
 from crackgen.procedural.surface import surface_faces, surface_uvs
 
@@ -34,7 +35,7 @@ class MapsLike(Protocol):
 class LiveSurface:
     """Surface mesh object + Principled BSDF driven by three float images."""
 
-    def __init__(self, scene: bpy.types.Scene, grid_px: int, texture_px: int):
+    def __init__(self, scene: bpy.types.Scene, grid_px: int, texture_px: int, swap_images: bool = False):
         self.grid_px = int(grid_px)
         self.texture_px = int(texture_px)
         faces = np.asarray(surface_faces(self.grid_px))
@@ -59,20 +60,16 @@ class LiveSurface:
         self.n_vertices = len(flat)
 
         T = self.texture_px
-        self.albedo = self._image("crackgen_albedo", "Linear Rec.709")
-        self.roughness = self._image("crackgen_roughness", "Non-Color")
-        self.normal = self._image("crackgen_normal", "Non-Color")
+        # swap_images: two images per map, for persistent data (see crackgen.blender.images)
+        self.albedo = ImageSlot("crackgen_albedo", T, "Linear Rec.709", swap_images)
+        self.roughness = ImageSlot("crackgen_roughness", T, "Non-Color", swap_images)
+        self.normal = ImageSlot("crackgen_normal", T, "Non-Color", swap_images)
         self._buf = np.ones((T * T, 4), np.float32)
         self.material = self._material()
         mesh.materials.append(self.material)
         obj = bpy.data.objects.new("crackgen_surface", mesh)
         scene.collection.objects.link(obj)
         self.object = obj
-
-    def _image(self, name: str, colorspace: str) -> bpy.types.Image:
-        img = bpy.data.images.new(name, self.texture_px, self.texture_px, alpha=False, float_buffer=True)
-        img.colorspace_settings.name = colorspace
-        return img
 
     def _material(self) -> bpy.types.Material:
         mat = bpy.data.materials.new("crackgen_surface")
@@ -84,7 +81,7 @@ class LiveSurface:
         texs = {}
         for key, img in (("albedo", self.albedo), ("roughness", self.roughness), ("normal", self.normal)):
             tex = nt.nodes.new("ShaderNodeTexImage")
-            tex.image = img
+            img.attach(tex)
             tex.interpolation = "Linear"
             tex.extension = "EXTEND"
             texs[key] = tex
@@ -98,7 +95,7 @@ class LiveSurface:
         nt.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
         return mat
 
-    def _set_image(self, img: bpy.types.Image, name: str, arr: np.ndarray, channels: int) -> None:
+    def _set_image(self, img: ImageSlot, name: str, arr: np.ndarray, channels: int) -> None:
         T = self.texture_px
         a = np.asarray(arr, dtype=np.float32)
         want = (T, T) if channels == 1 else (T, T, channels)
@@ -106,9 +103,7 @@ class LiveSurface:
             raise SurfaceUpdateError(f"material map {name!r} must have shape {want}, got {a.shape}")
         # Blender images are stored bottom row first, like our maps (row 0 = v = 0): no flip.
         self._buf[:, :3] = a.reshape(T * T, -1)
-        img.pixels.foreach_set(self._buf.ravel())
-        img.update()
-        img.update_tag()  # without it Cycles (persistent data) keeps the previous pixels
+        img.write(self._buf.ravel())
 
     def update(self, vertices: np.ndarray, maps: MapsLike) -> None:
         v = np.asarray(vertices, dtype=np.float32)

@@ -311,7 +311,29 @@ class RenderSection(Section):
     denoise: bool = Field(True, description="OpenImageDenoise")
     threads: int = Field(0, ge=0, le=1024, description="Cycles threads (0 = split between workers)")
     device: str = Field("cpu", pattern="^(cpu|gpu)$", description="cpu | gpu (falls back to cpu with a warning)")
-    max_bounces: int = Field(4, ge=0, le=128, description="Cycles max light bounces")
+    max_bounces: int = Field(4, ge=0, le=128, description="Cycles max light bounces (total, caps every kind below)")
+    # Speed/quality knobs (issue 12). Every default is Blender 4.5's factory value, so a recipe
+    # without them renders exactly as before; `crackgen bench --sweep` measures what they buy.
+    adaptive_sampling: bool = Field(True, description="Cycles adaptive sampling: stop pixels whose noise is below adaptive_threshold")
+    adaptive_threshold: float = Field(0.01, ge=0, le=1, description="adaptive sampling noise threshold (0 = automatic from samples)")
+    adaptive_min_samples: int = Field(0, ge=0, le=65536, description="samples before adaptive sampling may stop a pixel (0 = automatic)")
+    denoise_prefilter: Literal["none", "fast", "accurate"] = Field(
+        "accurate", description="OIDN prefilter of the albedo/normal passes: none | fast | accurate")
+    denoise_passes: Literal["rgb", "rgb_albedo", "rgb_albedo_normal"] = Field(
+        "rgb_albedo_normal", description="guide passes given to OIDN: rgb | rgb_albedo | rgb_albedo_normal")
+    denoise_quality: Literal["high", "balanced", "fast"] = Field("high", description="OIDN quality: high | balanced | fast")
+    diffuse_bounces: int = Field(4, ge=0, le=1024, description="Cycles max diffuse bounces")
+    glossy_bounces: int = Field(4, ge=0, le=1024, description="Cycles max glossy bounces")
+    transmission_bounces: int = Field(12, ge=0, le=1024, description="Cycles max transmission bounces")
+    transparent_bounces: int = Field(8, ge=0, le=1024, description="Cycles max transparent bounces (the shadow occluder is transparent)")
+    caustics_reflective: bool = Field(True, description="Cycles reflective caustics (false = filtered out)")
+    caustics_refractive: bool = Field(True, description="Cycles refractive caustics (false = filtered out)")
+    light_tree: bool = Field(True, description="Cycles light tree (many-light sampling)")
+    fast_gi: bool = Field(False, description="Cycles fast GI approximation (AO after ao_bounces bounces)")
+    ao_bounces: int = Field(1, ge=0, le=1024, description="fast GI: bounces before the AO approximation takes over")
+    clamp_direct: float = Field(0.0, ge=0, le=1e6, description="Cycles direct-light sample clamp (0 = off)")
+    clamp_indirect: float = Field(10.0, ge=0, le=1e6, description="Cycles indirect-light sample clamp (0 = off)")
+    persistent_data: bool = Field(False, description="keep Cycles scene data between samples (textures swap between two images)")
 
 
 class TofSection(Section):

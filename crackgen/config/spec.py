@@ -179,6 +179,29 @@ class RenderSpec:
     device: str  # cpu | gpu
     seed: int  # Cycles seed
     max_bounces: int
+    # issue 12 speed/quality knobs; defaults = Blender 4.5 factory values (older sample JSON lacks them)
+    adaptive_sampling: bool = True
+    adaptive_threshold: float = 0.01
+    adaptive_min_samples: int = 0
+    denoise_prefilter: str = "accurate"
+    denoise_passes: str = "rgb_albedo_normal"
+    denoise_quality: str = "high"
+    diffuse_bounces: int = 4
+    glossy_bounces: int = 4
+    transmission_bounces: int = 12
+    transparent_bounces: int = 8
+    caustics_reflective: bool = True
+    caustics_refractive: bool = True
+    light_tree: bool = True
+    fast_gi: bool = False
+    ao_bounces: int = 1
+    clamp_direct: float = 0.0
+    clamp_indirect: float = 10.0
+    persistent_data: bool = False
+
+
+_RENDER_FIELDS = [f.name for f in dataclasses.fields(RenderSpec)]
+RENDER_KNOBS = tuple(_RENDER_FIELDS[_RENDER_FIELDS.index("max_bounces") + 1:])  # copied 1:1 from [render]
 
 
 @dataclass
@@ -628,7 +651,7 @@ def make_spec(recipe: Recipe, index: int, attempt: int = 0) -> SampleSpec:
         camera=_camera(recipe, rng("camera"), stereo.baseline_m),
         render=RenderSpec(
             samples=r.samples, denoise=r.denoise, threads=r.threads, device=r.device,
-            seed=_seed(rng("render")), max_bounces=r.max_bounces,
+            seed=_seed(rng("render")), max_bounces=r.max_bounces, **{k: getattr(r, k) for k in RENDER_KNOBS},
         ),
         tof=_tof(recipe, rng("tof")),
         lidar=_lidar(recipe, rng("lidar")),

@@ -127,6 +127,7 @@ class SampleProducer:
                 samples=r.render.samples,
                 denoise=r.render.denoise,
                 max_bounces=r.render.max_bounces,
+                persistent_data=r.render.persistent_data,
                 max_lights=int(max(v for v in r.lights.count.support())),
                 shadow_px=SHADOW_PX,
             )
