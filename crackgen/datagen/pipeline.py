@@ -63,6 +63,7 @@ class Sample:
     members: dict[str, Any]  # member name (``rgb.png``...) -> array / dict of arrays
     meta: dict[str, Any]  # KEY.json: a function of (recipe, index) only, nothing run-dependent
     timings: dict[str, float] = field(default_factory=dict)  # per-stage seconds, never written to the shard
+    rgb_linear: np.ndarray | None = None  # (H,W,3) float32 scene-linear render, only with keep_linear (bench)
 
 
 class _Timer:
@@ -96,9 +97,10 @@ def fill_ratio(depth: np.ndarray) -> float:
 class SampleProducer:
     """Turns sample indices of one recipe into shard members; one per worker process."""
 
-    def __init__(self, recipe: Recipe, threads: int = 0):
+    def __init__(self, recipe: Recipe, threads: int = 0, keep_linear: bool = False):
         self.recipe = recipe
         self.threads = int(threads)
+        self.keep_linear = bool(keep_linear)  # keep the scene-linear render on the Sample (crackgen bench --sweep)
         self._scene = None
         self._targets: TargetPhotos | None = None
 
@@ -181,7 +183,7 @@ class SampleProducer:
                 run_spec = dataclasses.replace(spec, render=dataclasses.replace(spec.render, threads=self.threads))
             scene_meta = scene.update(run_spec, rig, vertices, maps, alpha)
         with tm.stage("render"):
-            out = scene.render()
+            out = scene.render(linear=self.keep_linear)
         with tm.stage("raycast"):
             caster = MeshRaycaster(vertices, np.asarray(surface_faces(g)), np.asarray(surface_uvs(g)))
         with tm.stage("groundtruth"):
@@ -268,7 +270,7 @@ class SampleProducer:
             "recipe_hash": self.recipe.hash,
             "versions": {"crackgen": crackgen.__version__, "spec": spec.version, **_blender_version()},
         }
-        return Sample(index=int(index), members=members, meta=meta, timings=tm.t)
+        return Sample(index=int(index), members=members, meta=meta, timings=tm.t, rgb_linear=out.rgb_linear)
 
     def produce(self, index: int) -> tuple[dict[str, Any], dict[str, Any]]:
         """(members, meta) of sample ``index``: what a shard holds for it (``json`` = meta)."""

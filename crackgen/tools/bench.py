@@ -34,6 +34,7 @@ ROWS = (
 
 def bench(recipe: Recipe, samples: int = 5, threads: int = 0, progress: bool = True) -> dict[str, Any]:
     """Median per-stage seconds over ``samples`` samples after one warm-up sample."""
+    import psutil
     from tqdm import tqdm
 
     from crackgen.datagen.pipeline import SampleProducer
@@ -45,6 +46,8 @@ def bench(recipe: Recipe, samples: int = 5, threads: int = 0, progress: bool = T
     t0 = time.perf_counter()
     producer.make(0)
     warmup_s = time.perf_counter() - t0
+    proc = psutil.Process()
+    rss_start = proc.memory_info().rss / 2**20  # after the warm-up: scene built, caches filled
     per: list[dict[str, float]] = []
     sizes: list[int] = []
     with tempfile.TemporaryDirectory(prefix="crackgen_bench_") as tmp, ShardWriter(tmp, 0) as writer:
@@ -63,6 +66,7 @@ def bench(recipe: Recipe, samples: int = 5, threads: int = 0, progress: bool = T
             t["write"] = max(0.0, time.perf_counter() - t2 - t["encode"])
             t["total"] = time.perf_counter() - t_start
             per.append(t)
+    rss_end = proc.memory_info().rss / 2**20
     producer.close()
     stages = {}
     for label, keys in ROWS:
@@ -84,6 +88,9 @@ def bench(recipe: Recipe, samples: int = 5, threads: int = 0, progress: bool = T
         "overhead_ratio": (total - render) / render if render > 0 else None,
         "median_sample_bytes": statistics.median(sizes) if sizes else 0,
         "samples_per_hour_one_worker": 3600.0 / total if total > 0 else None,
+        "rss_mb_after_warmup": rss_start,
+        "rss_mb_end": rss_end,
+        "rss_growth_mb": rss_end - rss_start,
     }
 
 
@@ -106,4 +113,7 @@ def format_table(res: dict[str, Any]) -> str:
                      f"{res['overhead_ratio']:.3f}")
     lines.append(f"median sample size {res['median_sample_bytes'] / 1e3:.0f} kB; "
                  f"{res['samples_per_hour_one_worker']:.0f} samples/h per worker at this thread count")
+    if "rss_growth_mb" in res:
+        lines.append(f"memory (RSS) {res['rss_mb_after_warmup']:.0f} MB after the warm-up, {res['rss_mb_end']:.0f} MB "
+                     f"after {res['samples']} samples: growth {res['rss_growth_mb']:+.1f} MB")
     return "\n".join(lines)

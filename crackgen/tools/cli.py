@@ -77,6 +77,32 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     return 0 if summary.ok else EXIT_RUN_FAILED
 
 
+def _cmd_bench_sweep(args: argparse.Namespace, recipe) -> int:
+    from crackgen.tools.sweep import BenchSweepError, SweepOptions, format_rows, sweep
+    from crackgen.tools.sweep_args import SweepError, build_settings, resolve
+
+    for name in ("workers", "reference_samples"):
+        if getattr(args, name) < 1:
+            return _err(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
+    if args.dilate < 0 or args.first_index < 0:
+        return _err(f"--dilate and --first-index must be >= 0, got {args.dilate} and {args.first_index}")
+    try:
+        settings = build_settings(args.sweep, args.combo, grid=args.grid)
+        resolve(recipe, settings)  # every value checked before the first render
+        opts = SweepOptions(samples=args.samples, first_index=args.first_index, reference_samples=args.reference_samples,
+                            workers=args.workers, threads=args.threads, dilate_px=args.dilate,
+                            cache_dir=args.cache or "", out=args.out)
+        res = sweep(recipe, settings, opts, progress=not args.json)
+    except (SweepError, BenchSweepError) as exc:
+        return _err(str(exc))
+    if args.json:
+        print(json.dumps(res, indent=1))
+    else:
+        print(format_rows(res["rows"], res["header"]))
+        print(f"wrote {', '.join(res['written'])}; references cached in {res['reference_cache']}")
+    return 0
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
     from crackgen.tools.bench import bench, format_table
 
@@ -85,6 +111,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     if args.samples < 1:
         return _err(f"--samples must be >= 1, got {args.samples}")
+    if args.sweep or args.combo:
+        return _cmd_bench_sweep(args, recipe)
     result = bench(recipe, samples=args.samples, threads=args.threads, progress=not args.json)
     print(json.dumps(result, indent=1) if args.json else format_table(result))
     return 0
@@ -199,8 +227,21 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="per-stage timing table of the sample pipeline")
     b.add_argument("recipe")
     b.add_argument("--samples", type=int, default=5, help="timed samples (after one warm-up sample)")
-    b.add_argument("--threads", type=int, default=0, help="Cycles threads (0 = recipe value, else all cores)")
+    b.add_argument("--threads", type=int, default=0,
+                   help="Cycles threads (0 = recipe value, else all cores; with --sweep: per worker, 0 = cores / workers)")
     b.add_argument("--json", action="store_true", help="machine-readable output")
+    b.add_argument("--sweep", action="append", default=[], metavar="KEY=V1,V2",
+                   help="time and compare these values of a dotted recipe key (one at a time around the recipe), "
+                        "or layout=WxT (W workers of T threads); repeatable")
+    b.add_argument("--combo", action="append", default=[], metavar="'K=V K=V'",
+                   help="one extra setting changing several keys together; repeatable")
+    b.add_argument("--grid", action="store_true", help="--sweep axes as a full grid instead of one at a time")
+    b.add_argument("--reference-samples", type=int, default=256, help="sweep: spp of the reference (no denoiser)")
+    b.add_argument("--workers", type=int, default=1, help="sweep: worker processes of every setting without a layout")
+    b.add_argument("--first-index", type=int, default=0, help="sweep: first sample index")
+    b.add_argument("--dilate", type=int, default=3, help="sweep: crack region = GT crack mask grown by this (px)")
+    b.add_argument("--cache", default=None, help="sweep: reference cache folder (default ~/.cache/crackgen/bench_refs)")
+    b.add_argument("--out", default="bench_sweep", help="sweep: folder for sweep.csv, sweep.json, sweep.md")
     b.set_defaults(func=_cmd_bench)
 
     s = sub.add_parser("show", help="coloured point cloud (and a PNG view) of one sample")
