@@ -318,10 +318,10 @@ class RenderSection(Section):
     adaptive_threshold: float = Field(0.01, ge=0, le=1, description="adaptive sampling noise threshold (0 = automatic from samples)")
     adaptive_min_samples: int = Field(0, ge=0, le=65536, description="samples before adaptive sampling may stop a pixel (0 = automatic)")
     denoise_prefilter: Literal["none", "fast", "accurate"] = Field(
-        "accurate", description="OIDN prefilter of the albedo/normal passes: none | fast | accurate")
+        "accurate", description="OIDN prefilter of the albedo/normal guide passes: none, fast or accurate")
     denoise_passes: Literal["rgb", "rgb_albedo", "rgb_albedo_normal"] = Field(
-        "rgb_albedo_normal", description="guide passes given to OIDN: rgb | rgb_albedo | rgb_albedo_normal")
-    denoise_quality: Literal["high", "balanced", "fast"] = Field("high", description="OIDN quality: high | balanced | fast")
+        "rgb_albedo_normal", description="guide passes given to OIDN: rgb, rgb_albedo or rgb_albedo_normal")
+    denoise_quality: Literal["high", "balanced", "fast"] = Field("high", description="OIDN quality: high, balanced or fast")
     diffuse_bounces: int = Field(4, ge=0, le=1024, description="Cycles max diffuse bounces")
     glossy_bounces: int = Field(4, ge=0, le=1024, description="Cycles max glossy bounces")
     transmission_bounces: int = Field(12, ge=0, le=1024, description="Cycles max transmission bounces")

@@ -12,7 +12,15 @@ on disk under a key of (reference recipe hash, index, crackgen version), so re-r
 further sweeps only render the new settings. Every run sets ``label.invisible = "keep"``: a
 ``redraw`` label policy would pick a different crack whenever the render changes, and the
 rows must compare one scene. The crack region is the pixel-centre thesis mask of the
-reference run, grown by ``--dilate`` pixels.
+reference run, grown by ``--dilate`` pixels. The first sample of every row (and of the
+reference) is also written as an 8-bit PNG under ``previews/``.
+
+Content keys (``material.texture_px``, ``surface.grid_px``...) are compared with the same
+baseline-content reference, so their rows measure what the change costs in the image, render
+noise included. The procedural textures are not the same pattern at another ``texture_px``
+(a 128 px albedo area-downsampled to 64 px correlates 0.36 with the 64 px one), so those rows'
+whole-image figures mostly measure a different texture; judge them by the crack columns and
+the previews.
 """
 from __future__ import annotations
 
@@ -238,6 +246,22 @@ def format_markdown(rows: list[dict[str, Any]], header: str) -> str:
     return "\n".join(out) + "\n"
 
 
+def _slug(label: str) -> str:
+    return "".join(c if c.isalnum() or c in "._=-" else "_" for c in label)[:120] or "setting"
+
+
+def write_preview(out: Path, label: str, index: int, rgb_linear: np.ndarray) -> Path:
+    """The 8-bit sRGB image of one render, to look at what the figures say (previews/SETTING_INDEX.png)."""
+    import cv2
+
+    from crackgen.postrender.camera_effects import linear_to_srgb, quantise
+
+    path = out / "previews" / f"{_slug(label)}_{index:06d}.png"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), cv2.cvtColor(quantise(linear_to_srgb(rgb_linear)), cv2.COLOR_RGB2BGR))
+    return path
+
+
 def write_outputs(rows: list[dict[str, Any]], meta: dict[str, Any], out: Path) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / "sweep.csv", out / "sweep.json", out / "sweep.md"]
@@ -277,11 +301,13 @@ def sweep(recipe: Recipe, settings: list[Setting], opts: SweepOptions, progress:
     try:
         bar.set_postfix_str(f"references ({missing} to render)")
         refs = load_references(ref, indices, cache, opts.cores, on_sample=lambda: bar.update(1))
+        write_preview(out, "reference", indices[0], refs[indices[0]][0])
         for setting, r in variants:
             layout = setting.layout or default_layout
             bar.set_postfix_str(setting.label[:40])
             res = run_renders(r, indices, layout, opts.cores, on_sample=lambda: bar.update(1), name=setting.label)
             rows.append(summarise(setting, layout, res, refs, opts.dilate_px))
+            write_preview(out, setting.label, indices[0], res.renders[indices[0]])
             write_outputs(rows, meta, out)
     finally:
         bar.close()

@@ -111,6 +111,8 @@ def test_sweep_caches_references_and_writes_rows(tmp_path, monkeypatch):
     assert [r["setting"] for r in saved["rows"]] == [r["setting"] for r in res["rows"]]
     assert (tmp_path / "out" / "sweep.csv").read_text().count("\n") == 4
     assert "| `render.samples=4` | 1x2 |" in (tmp_path / "out" / "sweep.md").read_text()
+    assert sorted(p.name for p in (tmp_path / "out" / "previews").iterdir()) == [
+        "baseline_000000.png", "layout=2x1_000000.png", "reference_000000.png", "render.samples=4_000000.png"]
     calls.clear()
     sw.sweep(Recipe(), settings[:1], opts, progress=False)
     assert [c[0] for c in calls] == ["baseline"]  # references came from the cache
