@@ -75,6 +75,19 @@ def write_csv(points: Sequence[CurvePoint], path: Path) -> None:
             w.writerow(asdict(p))
 
 
+def read_csv(path: Path) -> list[CurvePoint]:
+    """Points of an earlier (possibly interrupted) curve in ``path``; [] when there is none."""
+    if not path.is_file():
+        return []
+    types = {k: f.type for k, f in CurvePoint.__dataclass_fields__.items()}
+    cast = {"int": int, "float": float, "str": str}
+    with open(path, newline="") as f:
+        try:
+            return [CurvePoint(**{k: cast[str(types[k])](row[k]) for k in types}) for row in csv.DictReader(f)]
+        except (KeyError, ValueError) as exc:
+            raise TrainerInputError(f"{path}: not a curve CSV written by cracktrain ({exc}); use a new --out") from None
+
+
 def summarise(points: Sequence[CurvePoint]) -> dict[str, dict[int, dict[str, float]]]:
     """arm -> N -> {mean, std, min, max, count} of F1 over the repeats."""
     out: dict[str, dict[int, dict[str, float]]] = {}

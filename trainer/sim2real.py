@@ -15,7 +15,9 @@ real test set, P/R/F1/IoU at its best-F1 threshold and F1 at 0.5):
 
 ``--curve 0,10,30,...`` instead runs the label-efficiency curve (``trainer.curve``):
 for each N and repeat, real-only and synthetic -> fine-tune on the same N photos with the
-same ``--curve-steps``; one synthetic pretraining (``--pretrain-steps``) is shared.
+same ``--curve-steps``; one synthetic pretraining (``--pretrain-steps``, or a ``--pretrained``
+checkpoint) is shared. A second run with the same ``--out`` keeps finished points and resumes
+an interrupted training, so more repeats or sizes extend the curve.
 
 The real test set is a folder (``--real-test``) or a deterministic fraction of ``--real``
 (``--real-test-fraction``, ``--split-seed``). Rows whose inputs are missing are skipped.
@@ -25,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -32,14 +35,15 @@ from typing import Any
 import torch
 
 from trainer.builders import add_data_args, eval_loader, real_folder, sample_config_from_args
-from trainer.curve import CurvePoint, headline, nested_subsets, parse_sizes, plot_curve, summarise, table_lines
+from trainer.checkpoint import load_checkpoint
+from trainer.curve import CurvePoint, headline, nested_subsets, parse_sizes, plot_curve, read_csv, summarise, table_lines
 from trainer.curve import write_csv as write_curve_csv
 from trainer.errors import TrainerInputError
 from trainer.evaluate import load_model
 from trainer.site_adapt import targets_from_folder, targets_from_paths
 from trainer.sources import RealFolder, split_fraction
 from trainer.stream import SegStream
-from trainer.train import add_seg_args, evaluate
+from trainer.train import add_seg_args, evaluate, precise_bn_batches
 from trainer.train import main as train_seg
 
 log = logging.getLogger(__name__)
@@ -76,6 +80,8 @@ def add_sim2real_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--repeats", type=int, default=3, help="curve: repeats (different nested subsets and seeds)")
     p.add_argument("--curve-steps", type=int, default=None, help="curve: steps per model on N photos (default --max-steps)")
     p.add_argument("--pretrain-steps", type=int, default=None, help="curve: synthetic pretraining steps (default --max-steps)")
+    p.add_argument("--pretrained", default=None, metavar="CKPT",
+                   help="curve: start the fine-tune arm from this synthetic checkpoint instead of pretraining")
     p.add_argument("--out", default="runs/sim2real")
     p.add_argument("--device", default=None)
     p.add_argument("--no-progress", action="store_true")
@@ -244,10 +250,54 @@ def rows_markdown(args: argparse.Namespace, table: dict[str, Any], test_root: st
 
 # ------------------------------------------------------------------ the label-efficiency curve
 
+# What a curve's numbers depend on. A second run with the same --out continues the curve (more repeats or sizes,
+# or after a kill) only when these match what curve_settings.json recorded.
+CURVE_SETTINGS = ("synthetic", "real", "real_test", "real_test_fraction", "split_seed", "seed", "arch", "loss", "lr",
+                  "batch_size", "crop", "curve_steps", "pretrain_steps", "max_steps", "depth", "depth_norm",
+                  "mask_member", "precise_bn", "pretrained")
+
+
+def check_curve_settings(args: argparse.Namespace, out: Path, targets: tuple[str, ...] | None) -> None:
+    """Record the settings in ``out``, or refuse (one line) to continue a curve made with other ones."""
+    now = {k: getattr(args, k, None) for k in CURVE_SETTINGS} | {"target": describe_target(args, targets)}
+    path = out / "curve_settings.json"
+    if not path.is_file():
+        if (out / "curve.csv").is_file():
+            raise TrainerInputError(f"{out}: has a curve.csv but no curve_settings.json, so it cannot be continued "
+                                    "safely; use a new --out")
+        path.write_text(json.dumps(now, indent=2))
+        return
+    before = json.loads(path.read_text())
+    changed = [f"{k} {before.get(k)!r} -> {v!r}" for k, v in now.items() if before.get(k) != v]
+    if changed:
+        raise TrainerInputError(f"{out} holds a curve made with other settings ({'; '.join(changed)}); "
+                                "use a new --out or the same settings")
+
+
+def train_or_reuse(ns: argparse.Namespace) -> dict[str, Any]:
+    """Train, unless ``ns.out`` already holds this training: finished (kept) or interrupted (resumed)."""
+    path = Path(ns.out) / "checkpoint.pt"
+    if path.is_file():
+        ckpt = load_checkpoint(path)
+        legacy_final = ckpt["step"] >= (ns.max_steps or 0) and precise_bn_batches(ns) == 0  # before the flag existed
+        if ckpt.get("finished") or legacy_final:
+            log.info("kept the finished training in %s (%d steps)", ns.out, ckpt["step"])
+            return {"step": ckpt["step"], "seconds": 0.0, "out": ns.out}
+        log.info("resuming the interrupted training in %s at step %d", ns.out, ckpt["step"])
+        ns.resume = str(path)
+    return train_seg(ns)
+
+
+def small_set_repeat(n: int, args: argparse.Namespace) -> int:
+    """Repeat a few photos so every loader slot fills two batches (10 photos, batch 8, 2 workers: x4).
+    A fixed step budget sees the same photos either way; only the epoch length changes."""
+    return max(1, math.ceil(2 * args.batch_size * max(1, args.workers) / max(1, n)))
+
+
 def run_curve(args: argparse.Namespace) -> dict[str, Any]:
     """Real-only vs synthetic -> fine-tune on nested subsets of N labelled photos (see trainer.curve)."""
-    if not args.synthetic:
-        raise TrainerInputError("--curve needs --synthetic shards for the fine-tune arm")
+    if not args.synthetic and not args.pretrained:
+        raise TrainerInputError("--curve needs --synthetic shards (or a --pretrained checkpoint) for the fine-tune arm")
     if args.repeats < 1:
         raise TrainerInputError(f"--repeats must be >= 1, got {args.repeats}")
     sizes = parse_sizes(args.curve)
@@ -260,26 +310,37 @@ def run_curve(args: argparse.Namespace) -> dict[str, Any]:
     targets = adaptation_targets(args, train_stems)
     steps = args.curve_steps or args.max_steps
     device = _device(args)
-    log.info("curve: synthetic pretraining (%d steps%s)", args.pretrain_steps or args.max_steps,
-             ", adapted" if targets else "")
-    pre = seg_args(args, out / "pretrain", args.synthetic, None, None,
-                   max_steps=args.pretrain_steps or args.max_steps, adapt_targets=targets)
-    pre_info = train_seg(pre)
-    pre_ckpt = out / "pretrain" / "checkpoint.pt"
+    check_curve_settings(args, out, targets)
+    done = {(p.n, p.repeat, p.arm): p for p in read_csv(out / "curve.csv")}
+    if args.pretrained:
+        ckpt = load_checkpoint(args.pretrained)
+        pre_info, pre_ckpt = {"step": ckpt["step"], "seconds": 0.0}, Path(args.pretrained)
+        log.info("curve: fine-tunes start from %s (%d steps)", pre_ckpt, ckpt["step"])
+    else:
+        pre = seg_args(args, out / "pretrain", args.synthetic, None, None,
+                       max_steps=args.pretrain_steps or args.max_steps, adapt_targets=targets)
+        log.info("curve: synthetic pretraining (%d steps%s)", pre.max_steps, ", adapted" if targets else "")
+        pre_info = train_or_reuse(pre)
+        pre_ckpt = out / "pretrain" / "checkpoint.pt"
     points: list[CurvePoint] = []
     jobs = [(r, n, arm) for r in range(args.repeats) for n in sizes for arm in ("real", "finetune")
             if not (n == 0 and arm == "real")]
     t_start = time.perf_counter()
     for k, (r, n, arm) in enumerate(jobs, 1):
         subset = nested_subsets(train_stems, sizes, args.seed, r)[n]
+        if (n, r, arm) in done:  # finished and scored by an earlier run of the same curve
+            points.append(done[(n, r, arm)])
+            log.info("curve %d/%d: repeat %d, N=%d, %s: kept from %s", k, len(jobs), r, n, arm, out / "curve.csv")
+            continue
         log.info("curve %d/%d: repeat %d, N=%d, %s", k, len(jobs), r, n, arm)
         t0 = time.perf_counter()
         if n == 0:
             s, trained = score(pre_ckpt, test, args, device), 0
         else:
             ns = seg_args(args, out / f"r{r}" / f"n{n:04d}_{arm}", None, args.real, subset, max_steps=steps,
-                          seed=args.seed + r, init=str(pre_ckpt) if arm == "finetune" else None)
-            train_seg(ns)
+                          seed=args.seed + r, init=str(pre_ckpt) if arm == "finetune" else None,
+                          real_repeat=small_set_repeat(n, args))
+            train_or_reuse(ns)
             s, trained = score(Path(ns.out) / "checkpoint.pt", test, args, device), steps
         b = s["best"]
         points.append(CurvePoint(n=n, repeat=r, arm=arm, f1=b["f1"], precision=b["precision"], recall=b["recall"],

@@ -470,7 +470,7 @@ def fit(run: Run, train_ds: SegStream, val_ds: SegStream | None, state: TrainSta
     bar.close()
     finish_precise_bn(run, train_ds, state)
     if run.main_proc:
-        save_checkpoint(run.out / "checkpoint.pt", checkpoint_payload(run, state))
+        save_checkpoint(run.out / "checkpoint.pt", checkpoint_payload(run, state) | {"finished": True})
         if val_ds is not None and state.best.get("f1", -1) < 0:
             record_validation(run, state, validate(run, val_ds, state))
 

@@ -37,3 +37,71 @@ def test_labels_to_match_and_headline():
     assert "about 45 photos" in headline(s, 30) and "1.5x" in headline(s, 30)
     assert labels_to_match(s["real"], 0.95) is None
     assert "does not reach it" in headline(summarise([_pt(10, "real", 0.1), _pt(30, "finetune", 0.9)]))
+
+
+def test_csv_round_trip_keeps_every_field(tmp_path):
+    from trainer.curve import read_csv, write_csv
+
+    pts = [_pt(10, "real", 0.31, 0), _pt(30, "finetune", 0.625, 2)]
+    write_csv(pts, tmp_path / "curve.csv")
+    assert read_csv(tmp_path / "curve.csv") == pts
+    assert read_csv(tmp_path / "missing.csv") == []
+    (tmp_path / "bad.csv").write_text("a,b\n1,2\n")
+    with pytest.raises(TrainerInputError, match="not a curve CSV"):
+        read_csv(tmp_path / "bad.csv")
+
+
+def test_curve_continues_only_with_the_same_settings(tmp_path):
+    import argparse
+
+    from trainer.sim2real import add_sim2real_args, check_curve_settings
+
+    p = argparse.ArgumentParser()
+    add_sim2real_args(p)
+    args = p.parse_args(["--synthetic", "s", "--real", "r", "--curve", "0,10", "--curve-steps", "100"])
+    check_curve_settings(args, tmp_path, None)  # first run records them
+    check_curve_settings(args, tmp_path, None)  # the same settings continue
+    args.curve, args.repeats = "0,10,30", 5  # more sizes and repeats extend the same curve
+    check_curve_settings(args, tmp_path, None)
+    args.curve_steps = 200
+    with pytest.raises(TrainerInputError, match=r"curve_steps 100 -> 200"):
+        check_curve_settings(args, tmp_path, None)
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "curve.csv").write_text("n\n")
+    with pytest.raises(TrainerInputError, match="no curve_settings.json"):
+        check_curve_settings(args, other, None)
+
+
+def test_train_or_reuse_keeps_finished_and_resumes_interrupted(tmp_path, monkeypatch):
+    import argparse
+
+    import torch
+
+    import trainer.sim2real as s2r
+
+    calls = []
+    monkeypatch.setattr(s2r, "train_seg", lambda ns: calls.append(ns.resume) or {"step": ns.max_steps, "seconds": 1.0})
+
+    def ns(name, init=None):
+        (tmp_path / name).mkdir(exist_ok=True)
+        return argparse.Namespace(out=str(tmp_path / name), max_steps=100, init=init, precise_bn=None, resume=None)
+
+    def ckpt(name, step, **extra):
+        torch.save({"model": {}, "args": {}, "sample_config": {}, "step": step, **extra}, tmp_path / name / "checkpoint.pt")
+
+    assert s2r.train_or_reuse(ns("fresh"))["seconds"] == 1.0 and calls == [None]  # nothing there: trains
+    n = ns("done", init="pre.pt")
+    ckpt("done", 100, finished=True)
+    assert s2r.train_or_reuse(n)["seconds"] == 0.0 and len(calls) == 1  # finished: kept
+    n = ns("killed", init="pre.pt")
+    ckpt("killed", 40)
+    s2r.train_or_reuse(n)
+    assert calls[-1] == str(tmp_path / "killed" / "checkpoint.pt")  # interrupted: resumed
+    n = ns("no_bn_yet", init="pre.pt")
+    ckpt("no_bn_yet", 100)  # all steps done, precise BN (fine-tune) may not be: resumed, which redoes it
+    s2r.train_or_reuse(n)
+    assert calls[-1] == str(tmp_path / "no_bn_yet" / "checkpoint.pt")
+    n = ns("old_pretrain")
+    ckpt("old_pretrain", 100)  # no precise BN without --init: a checkpoint at the last step is final
+    assert s2r.train_or_reuse(n)["seconds"] == 0.0
