@@ -15,7 +15,8 @@ Definitions (all in the units of ``coords``: pixels, metres per pixel, or an (H,
   step is corrected for the staircase at the skeleton's local angle (``_step_correction``).
 - ``mean_width``: mask area / ``total_length`` (exact for a strip of constant width; in 3-D
   the area is the sum of per-pixel surface patches).  ``max_width``: the largest local width,
-  measured across the crack along the skeleton's normal, edge to edge, at skeleton pixels
+  measured edge to edge along the skeleton's normal (perpendicular to the crack's 3-D
+  direction for point maps), averaged over 5 x 5 skeleton neighbours, at skeleton pixels
   away from junctions (where "across" is undefined).
 
 Rings and networks: a closed ring has no tips, so its ``tip_to_tip`` is half its
@@ -176,8 +177,10 @@ def _exit_distance(mask: np.ndarray, rows: np.ndarray, cols: np.ndarray, dirs: n
 
 
 def _edt(m: np.ndarray) -> np.ndarray:
-    """Euclidean distance (px) of each True pixel to the nearest False one (OpenCV: fast, exact mask)."""
-    return cv2.distanceTransform(m.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    """Euclidean distance (px) of each True pixel to the nearest False one or the image border
+    (outside the image counts as background; OpenCV: fast, exact mask)."""
+    pad = np.pad(m.astype(np.uint8), 1)
+    return cv2.distanceTransform(pad, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[1:-1, 1:-1]
 
 
 def _prune_spurs(skel: np.ndarray, dt: np.ndarray) -> np.ndarray:
@@ -299,8 +302,13 @@ def measure_cracks(
     normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
     t_pos = _exit_distance(m, rows, cols, normal, t_max)
     t_neg = _exit_distance(m, rows, cols, -normal, t_max)
-    width = _dist(pts, rows - t_neg * normal[:, 0], cols - t_neg * normal[:, 1],
-                  rows + t_pos * normal[:, 0], cols + t_pos * normal[:, 1])
+    across = (_sample(pts, rows + t_pos * normal[:, 0], cols + t_pos * normal[:, 1])
+              - _sample(pts, rows - t_neg * normal[:, 0], cols - t_neg * normal[:, 1]))
+    # Perpendicular to the crack in 3-D: on a foreshortened surface the image normal is not.
+    along = (_sample(pts, rows + tangent[:, 0], cols + tangent[:, 1])
+             - _sample(pts, rows - tangent[:, 0], cols - tangent[:, 1]))
+    along /= np.maximum(np.linalg.norm(along, axis=1, keepdims=True), 1e-300)
+    width = np.linalg.norm(across - (across * along).sum(axis=1, keepdims=True) * along, axis=1)
     width = _window_mean(skel, rows, cols, width)
     junction = deg >= 3
     if junction.any():

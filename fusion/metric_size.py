@@ -27,6 +27,7 @@ from fusion.crack_measure import CrackMeasurement, measure_cracks
 
 __all__ = ["MetricSizeError", "load_intrinsics", "surface_depth", "surface_points", "measure_in_view"]
 
+RIM_PX = 2  # pixels around the crack whose depth is replaced by the surface's
 MIN_SUPPORT = 0.1  # Gaussian-weighted share of valid pixels needed to fit a local plane
 
 
@@ -70,14 +71,17 @@ def surface_depth(depth: np.ndarray, crack_mask: np.ndarray | None = None) -> np
     d = np.asarray(depth, dtype=np.float64)
     if d.ndim != 2:
         raise MetricSizeError(f"depth must be a 2-D map, got shape {d.shape}")
-    valid = np.isfinite(d) & (d > 0)
+    measured = np.isfinite(d) & (d > 0)
+    valid = measured
     if crack_mask is not None:
         cm = np.asarray(crack_mask) > 0
         if cm.shape != d.shape:
             raise MetricSizeError(f"crack mask {cm.shape} and depth {d.shape} differ in size")
-        valid &= ~cm
+        valid = measured & ~cm
+        if not valid.any():  # crack everywhere: its own depth is all there is
+            valid = measured
     if not valid.any():
-        raise MetricSizeError("depth has no valid surface pixel (all <= 0, NaN or crack)")
+        raise MetricSizeError("depth has no valid pixel (all <= 0 or NaN)")
     if valid.all():
         return d
     inv = np.where(valid, 1.0 / np.where(valid, d, 1.0), 0.0)
@@ -140,9 +144,16 @@ def surface_points(depth: np.ndarray, K: np.ndarray, crack_mask: np.ndarray | No
     return np.stack([x, y, z], axis=-1)
 
 
-def measure_in_view(mask: np.ndarray, depth: np.ndarray, K: np.ndarray, **kw) -> CrackMeasurement:
-    """Crack lengths and widths in metres on the surface seen in one camera view."""
+def measure_in_view(mask: np.ndarray, depth: np.ndarray, K: np.ndarray, *, rim_px: int = RIM_PX,
+                    **kw) -> CrackMeasurement:
+    """Crack lengths and widths in metres on the surface seen in one camera view.
+
+    The surface is filled under the crack and a ``rim_px`` rim around it: depth at a crack's
+    edge is the wall (or a sensor's mixed pixel), whose slope would inflate the pixel areas."""
     m = np.asarray(mask) > 0
     if m.shape != np.shape(depth):
         raise MetricSizeError(f"mask {m.shape} and depth {np.shape(depth)} differ in size")
-    return measure_cracks(m, surface_points(depth, K, m), **kw)
+    holes = m
+    if rim_px > 0:
+        holes = cv2.dilate(m.astype(np.uint8), np.ones((2 * rim_px + 1,) * 2, np.uint8)).astype(bool)
+    return measure_cracks(m, surface_points(depth, K, holes), **kw)
