@@ -6,9 +6,9 @@ sensor's hole), and a path along the floor zig-zags in depth.  So crack pixels a
 without depth are filled from the surrounding surface first, in inverse depth (1/z is
 linear in the pixel coordinates on a plane, so a flat surface is filled exactly):
 
-a local plane in 1/z fitted to the valid pixels around each hole pixel by Gaussian-weighted
-least squares (first-order normalised convolution), at the smallest scale (sigma 2, 4, 8...
-px) with enough support.  The same code serves dense depth with crack holes and sparse
+a local plane in 1/z fitted to the valid pixels around each hole pixel by least squares
+over a box window (first-order normalised convolution), at the smallest window (radius 2,
+4, 8... px) with enough support.  The same code serves dense depth with crack holes and sparse
 (LiDAR-like) depth.
 
 Points are camera-frame (x right, y down, z forward; metres), pixel centres at integer
@@ -28,7 +28,7 @@ from fusion.crack_measure import CrackMeasurement, measure_cracks
 __all__ = ["MetricSizeError", "load_intrinsics", "surface_depth", "surface_points", "measure_in_view"]
 
 RIM_PX = 2  # pixels around the crack whose depth is replaced by the surface's
-MIN_SUPPORT = 0.1  # Gaussian-weighted share of valid pixels needed to fit a local plane
+MIN_SUPPORT = 0.1  # share of valid pixels in the window needed to fit a local plane
 
 
 class MetricSizeError(ValueError):
@@ -93,10 +93,10 @@ def surface_depth(depth: np.ndarray, crack_mask: np.ndarray | None = None) -> np
     yy -= h / 2.0
     todo = holes.copy()
     wt = valid.astype(np.float64)
-    sigma = 2.0
+    radius = 2.0
     while todo.any():
-        last = sigma > 2 * max(h, w)
-        blur = _blur(sigma)
+        last = radius > 2 * max(h, w)
+        blur = _blur(radius)
         s0 = blur(wt)
         m = [blur(wt * a) for a in (xx, yy, xx * xx, xx * yy, yy * yy, inv, inv * xx, inv * yy)]
         r, c = np.nonzero(todo)
@@ -106,7 +106,7 @@ def surface_depth(depth: np.ndarray, crack_mask: np.ndarray | None = None) -> np
         b = np.stack([sf, sxf, syf], -1)
         # enough support around the pixel, spread in both directions: a plane is determined
         ok = s0[r, c] > MIN_SUPPORT
-        ok &= np.abs(np.linalg.det(A)) > 1e-9 * np.maximum(s0[r, c], 1e-300) ** 3 * sigma ** 4
+        ok &= np.abs(np.linalg.det(A)) > 1e-9 * np.maximum(s0[r, c], 1e-300) ** 3 * radius ** 4
         if last:
             ok = s0[r, c] > 0
         coef = np.zeros((r.size, 3))
@@ -121,15 +121,16 @@ def surface_depth(depth: np.ndarray, crack_mask: np.ndarray | None = None) -> np
         todo[r[good], c[good]] = False
         if last:
             break
-        sigma *= 2.0
+        radius *= 2.0
     return 1.0 / np.maximum(filled, 1e-12)
 
 
-def _blur(sigma: float):
-    k = int(2 * round(3 * sigma) + 1)
+def _blur(radius: float):
+    """Local mean over a (2r+1)^2 box (O(1) per pixel whatever r: wide cracks stay cheap)."""
+    k = (2 * int(radius) + 1,) * 2
 
     def f(a: np.ndarray) -> np.ndarray:
-        return cv2.GaussianBlur(a, (k, k), sigma, borderType=cv2.BORDER_CONSTANT)
+        return cv2.boxFilter(a, -1, k, normalize=True, borderType=cv2.BORDER_CONSTANT)
     return f
 
 

@@ -1,4 +1,4 @@
-"""Micro-benchmarks of the numpy core: crack map, skeleton + GT length, surface mesh.
+"""Micro-benchmarks of the numpy core: crack map, skeleton, skeleton diameters, crack measurement, surface mesh.
 
 Run ``python -m crackgen.tools.bench_core [--px 1024] [--grid 384] [--repeat 5]``; prints the
 median seconds per stage (after one warm-up call, so numba compilation is excluded).

@@ -89,18 +89,28 @@ def measure_check(path: str | os.PathLike, limit: int | None = None, progress: b
         raise MeasureCheckError(str(exc)) from None
     if not rows:
         raise MeasureCheckError(f"{path}: no sample with a visible crack to check")
+    shapes = sorted({str(r["shape"]) for r in rows})
     return {"path": str(path), "samples": len(rows), "skipped": skipped,
-            "median_measure_s": float(np.median(times)), "errors": _relative_errors(rows), "per_sample": rows}
+            "median_measure_s": float(np.median(times)), "errors": _relative_errors(rows),
+            "errors_by_shape": {sh: _relative_errors([r for r in rows if str(r["shape"]) == sh]) for sh in shapes},
+            "per_sample": rows}
 
 
 def format_check(res: dict[str, Any]) -> str:
     lines = [f"{res['samples']} samples checked ({res['skipped']} without a visible crack skipped); "
              f"median {1e3 * res['median_measure_s']:.0f} ms per measurement",
              f"{'quantity':<16} {'n':>4} {'median rel. err':>16} {'p90 rel. err':>13} {'median bias':>12}"]
+    def pct(v):
+        return "-" if v is None else f"{100 * v:.1f}%"
+
     for q, e in res["errors"].items():
-        def pct(v):
-            return "-" if v is None else f"{100 * v:.1f}%"
         lines.append(f"{q:<16} {e['n']:>4} {pct(e['median']):>16} {pct(e['p90']):>13} {pct(e['bias']):>12}")
+    lines.append("by crack shape, median / p90 relative error:")
+    lines.append(f"{'shape':<10} {'n':>4} " + " ".join(f"{q:>18}" for q in QUANTITIES))
+    for sh, errs in res.get("errors_by_shape", {}).items():
+        n = errs[QUANTITIES[0]]["n"]
+        cells = " ".join(f"{pct(errs[q]['median']) + ' / ' + pct(errs[q]['p90']):>18}" for q in QUANTITIES)
+        lines.append(f"{sh:<10} {n:>4} {cells}")
     return "\n".join(lines)
 
 
