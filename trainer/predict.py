@@ -38,6 +38,7 @@ from trainer.augment import sample_to_tensors
 from trainer.builders import add_data_args, real_folder
 from trainer.errors import TrainerInputError
 from trainer.evaluate import _inherit_depth, load_model
+from trainer.sources import _SHARD_MEMBER
 
 log = logging.getLogger(__name__)
 REPORT_NAME = "report.json"
@@ -84,23 +85,39 @@ def _is_dataset(root: Path) -> bool:
     return (root / "manifest.json").is_file() or any(root.glob("shard-*.tar"))
 
 
-def _shard_samples(root: Path) -> tuple[list[str], Any]:
-    """(keys, loader) over a crackgen dataset: rgb, ray-cast depth and K of each sample."""
-    from crackgen.shards import ShardError, iter_samples
+def _shard_samples(root: Path, model_depth: str) -> tuple[Any, int | None]:
+    """(lazy iterator of samples, count or None) over a crackgen dataset: rgb, ray-cast depth and K,
+    plus the depth member the model takes (``model_depth``: tof, lidar, gt or none)."""
+    from crackgen.shards import ShardError, iter_samples, open_dataset
 
     try:
-        samples = {s["__key__"]: s for s in iter_samples(str(root), members=["rgb", "depth", "meta"])}
+        total = open_dataset(str(root)).num_samples
     except ShardError as exc:
         raise TrainerInputError(f"{root}: cannot read the dataset: {exc}") from None
 
-    def load(key: str) -> dict[str, Any]:
-        s = samples[key]
-        if "rgb" not in s or "depth" not in s or "meta" not in s:
-            raise TrainerInputError(f"{root}: sample {key} lacks rgb, depth or its JSON")
+    def gen():
+        try:
+            members = ["rgb", "depth", "meta"] + ([_SHARD_MEMBER[model_depth]] if model_depth != "none" else [])
+            for s in iter_samples(str(root), members=members):
+                yield s
+        except ShardError as exc:
+            raise TrainerInputError(f"{root}: cannot read the dataset: {exc}") from None
+    return gen(), total
+
+
+def _shard_sample(root: Path, s: dict[str, Any], model_depth: str) -> dict[str, Any]:
+    """Trainer sample dict: ``depth`` = the model's depth input, ``metric_depth`` = ray-cast depth for the measurement."""
+    key = s["__key__"]
+    try:
         K = np.asarray(s["meta"]["cameras"]["rgb"]["K"], dtype=np.float64)
-        return {"key": key, "rgb": np.asarray(s["rgb"])[..., :3], "depth": np.asarray(s["depth"], np.float32),
-                "K": K, "path": f"{root}:{key}"}
-    return sorted(samples), load
+    except (KeyError, TypeError):
+        raise TrainerInputError(f"{root}: sample {key} has no cameras.rgb.K in its JSON") from None
+    member = _SHARD_MEMBER.get(model_depth)
+    if "rgb" not in s or "depth" not in s or (member and member not in s):
+        raise TrainerInputError(f"{root}: sample {key} lacks rgb, depth or the model's depth member {member}")
+    return {"key": key, "rgb": np.asarray(s["rgb"])[..., :3],
+            "depth": np.asarray(s[member], np.float32) if member else None,
+            "metric_depth": np.asarray(s["depth"], np.float32), "K": K, "path": f"{root}:{key}"}
 
 
 def _measure(mask: np.ndarray, sample: dict[str, Any], K: np.ndarray | None, args: argparse.Namespace):
@@ -138,8 +155,13 @@ def run_predict(args: argparse.Namespace) -> PredictResult:
     if not root.is_dir():
         raise TrainerInputError(f"input folder {root} does not exist")
     if _is_dataset(root):
-        keys, load = _shard_samples(root)
-        image_path = lambda key: f"{root}:{key}"  # noqa: E731
+        items, total = _shard_samples(root, args.depth)
+
+        def load(item):
+            return _shard_sample(root, item, args.depth)
+
+        def image_path(item):
+            return f"{root}:{item['__key__']}"
     else:
         if not (root / args.image_dir).is_dir():  # a flat folder of photos
             args.image_dir = "."
@@ -148,21 +170,22 @@ def run_predict(args: argparse.Namespace) -> PredictResult:
             args.depth = "gt"
         folder = real_folder(args, root, require_masks=False)
         args.depth = model_depth
-        keys, load, image_path = folder.keys, folder.load, folder.image_path
+        items, total, load, image_path = folder.keys, len(folder.keys), folder.load, folder.image_path
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     result = PredictResult(report=out / REPORT_NAME)
-    for key in tqdm(keys, desc="predict", disable=args.no_progress):
+    for item in tqdm(items, total=total, desc="predict", disable=args.no_progress):
         try:
-            sample = load(key)
+            sample = load(item)
             if cfg.channels == "rgb" and sample.get("depth") is not None:  # kept for the measurement only
                 sample = {**sample, "metric_depth": sample["depth"], "depth": None}
         except TrainerInputError as exc:
             if not args.skip_bad:
                 raise
             log.warning("skipped: %s", exc)
-            result.skipped.append({"image": str(image_path(key)), "reason": str(exc)})
+            result.skipped.append({"image": str(image_path(item)), "reason": str(exc)})
             continue
+        key = sample["key"]
         t = sample_to_tensors(sample, cfg)
         with torch.no_grad():
             logits = model(t["image"][None].to(device))

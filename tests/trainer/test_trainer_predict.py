@@ -89,3 +89,18 @@ def test_predict_intrinsics_and_depth_give_metres(tmp_path, capsys):
     rc = main(["predict", str(root), "-c", str(ckpt), "--out", str(out), "--no-progress", "--intrinsics", str(K)])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "needs depth" in err[0]
+
+
+def test_predict_on_shards_uses_each_samples_depth_and_k(tmp_path):
+    from crackgen.shards import ShardWriter, sample_key
+
+    ckpt = _untrained_checkpoint(tmp_path / "untrained.pt")
+    K = [[600.0, 0, 23.5], [0, 600.0, 15.5], [0, 0, 1]]
+    with ShardWriter(tmp_path / "ds", 0) as w:
+        w.add(sample_key(0, 0), {"rgb.png": np.full((32, 48, 3), 90, np.uint8), "mask.png": np.zeros((32, 48), np.uint8),
+                                 "depth.exr": np.full((32, 48), 1.5, np.float32), "json": {"cameras": {"rgb": {"K": K}}}})
+    out = tmp_path / "pred"
+    assert main(["predict", str(tmp_path / "ds"), "-c", str(ckpt), "--out", str(out), "--threshold", "0.0",
+                 "--no-progress"]) == 0
+    rep = json.loads((out / "000000-00000.json").read_text())
+    assert rep["length_unit"] == "m" and 0.0025 * 47 * 0.99 <= rep["crack_length"] <= 0.0025 * np.hypot(47, 31)
