@@ -251,13 +251,15 @@ def crack_components(
     step_px: int = 4,
     max_sweeps: int = 64,
     is_skeleton: bool = False,
+    graph: SkeletonGraph | None = None,
 ) -> list[CrackComponent]:
     """Geodesic diameter of every 8-connected skeleton component of ``mask``.
 
     ``coords``: None (pixels), metres per pixel, or an (H, W, 3) point array (NaN = invalid).
     ``step_px``: polyline step along the geodesic path (see module doc; 1 = raw graph length).
     ``max_sweeps``: Dijkstra budget per looped component (see ``_bounding_diameter``).
-    ``is_skeleton=True`` skips skeletonisation when the caller already has one.
+    ``is_skeleton=True`` skips skeletonisation when the caller already has one; ``graph``
+    reuses that skeleton's ``skeleton_graph(mask, coords)``.
     Components are returned longest first.  The skeleton stops short of the mask's tips:
     ``fusion.crack_measure`` adds the missing ends.
     """
@@ -265,7 +267,7 @@ def crack_components(
         raise CrackLengthError(f"step_px must be an integer >= 1, got {step_px!r}")
     m = _as_mask(mask)
     skel = m if is_skeleton else skeletonize(m)
-    g = skeleton_graph(skel, coords)
+    g = graph if graph is not None else skeleton_graph(skel, coords)
     n = g.rows.size
     if n == 0:
         return []

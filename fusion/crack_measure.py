@@ -242,9 +242,9 @@ def _step_correction(tangent: np.ndarray) -> np.ndarray:
     return (1.0 / np.cos(a)) / (1.0 + (np.sqrt(2.0) - 1.0) * np.tan(a))
 
 
-def _degrees(skel: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+def _degrees(skel: np.ndarray, shape: tuple[int, int], g=None) -> np.ndarray:
     """(H, W) skeleton degree without staircase-corner diagonals (0 off the skeleton)."""
-    g = skeleton_graph(skel)
+    g = skeleton_graph(skel) if g is None else g
     keep = ~g.redundant
     deg = np.bincount(g.edges[keep].ravel(), minlength=g.rows.size)
     out = np.zeros(shape, np.int64)
@@ -270,13 +270,14 @@ def measure_cracks(
     pts = _check_coords(m.shape, coords)
     dt = _edt(m)
     skel = _prune_spurs(skeletonize(m), dt)
+    g = skeleton_graph(skel, None if np.ndim(pts) == 0 else pts)
     comps: list[CrackComponent] = crack_components(
-        skel, None if np.ndim(pts) == 0 else pts, step_px=step_px, max_sweeps=max_sweeps, is_skeleton=True)
+        skel, None if np.ndim(pts) == 0 else pts, step_px=step_px, max_sweeps=max_sweeps, is_skeleton=True, graph=g)
     if not comps:
         return CrackMeasurement(0.0, 0.0, 0.0, float("nan"), float("nan"), [])
     scale = float(pts) if np.ndim(pts) == 0 else 1.0  # crack_components ran in pixels for a scalar pixel size
     rows, cols = np.nonzero(skel)
-    deg = _degrees(skel, m.shape)
+    deg = _degrees(skel, m.shape, g)
     tangent, inward = _directions(skel, rows, cols)
     t_max = 2.0 * float(dt.max()) + 2.0
 
@@ -333,7 +334,6 @@ def measure_cracks(
     comps_per_mask = np.bincount(mask_lab[[c.pixels[0, 0] for c in comps], [c.pixels[0, 1] for c in comps]],
                                  minlength=n_mask + 1)
 
-    g = skeleton_graph(skel, None if np.ndim(pts) == 0 else pts)
     keep = ~g.redundant
     # Skeleton length with branches, each step corrected for the staircase at the local angle.
     node_of = np.full(m.shape, -1, np.int64)

@@ -7,9 +7,11 @@ without depth are filled from the surrounding surface first, in inverse depth (1
 linear in the pixel coordinates on a plane, so a flat surface is filled exactly):
 
 a local plane in 1/z fitted to the valid pixels around each hole pixel by least squares
-over a box window (first-order normalised convolution), at the smallest window (radius 2,
-4, 8... px) with enough support.  The same code serves dense depth with crack holes and sparse
-(LiDAR-like) depth.
+over a box window (first-order normalised convolution), at the smallest window (radius 6,
+12, 24... px) with enough support.  Smaller windows fit their planes to a few one-sided
+pixels next to the crack, where the renderer's groove and real sensors' edge pixels bend the
+surface (on the measure-check set, radius 2 widened the p90 max-width error from 27 % to 46 %).
+The same code serves dense depth with crack holes and sparse (LiDAR-like) depth.
 
 Points are camera-frame (x right, y down, z forward; metres), pixel centres at integer
 (u, v) as in ``fusion.camera``.
@@ -93,7 +95,7 @@ def surface_depth(depth: np.ndarray, crack_mask: np.ndarray | None = None) -> np
     yy -= h / 2.0
     todo = holes.copy()
     wt = valid.astype(np.float64)
-    radius = 2.0
+    radius = 6.0
     while todo.any():
         last = radius > 2 * max(h, w)
         blur = _blur(radius)
