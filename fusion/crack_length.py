@@ -1,4 +1,8 @@
-"""Crack length from a binary mask (thesis 5.1.4) as the geodesic diameter of its skeleton.
+"""Skeleton geodesic diameters of a binary crack mask (the graph part of thesis 5.1.4).
+
+``fusion.crack_measure`` builds the reported quantities (tip-to-tip length with the tips
+extended to the mask, total skeleton length, widths, the thesis's longest path) on top of
+the per-component skeleton diameters computed here.
 
 The thesis defines a crack's length as the longest, over pairs of mask pixels, of the
 shortest path between them that stays inside the mask: the path between the two crack
@@ -21,7 +25,7 @@ exact after a few sweeps on crack skeletons; near-perfect rings can need many, s
 already the exact value in practice) is returned with ``CrackComponent.exact = False``.
 
 Staircase bias: 8-connected pixel paths overestimate the length of digital lines by up
-to 8 % (at 22.5 deg).  The reported ``length`` is therefore measured along the geodesic
+to 8 % (at 22.5 deg).  ``path_length`` is therefore measured along the geodesic
 path as a polyline through every ``step_px``-th path pixel (default 4; 1 = raw graph
 length).  Measured: <= 0.6 % error on digital lines at any angle, <= 3 % on arcs of
 radius 8 px (chords cut the curve), vs +4..8 % for the raw graph length.
@@ -41,7 +45,6 @@ __all__ = [
     "skeleton",
     "skeleton_graph",
     "crack_components",
-    "crack_length",
     "skeleton_length",
 ]
 
@@ -57,11 +60,12 @@ class CrackLengthError(ValueError):
 class CrackComponent:
     """One connected skeleton component and its geodesic diameter."""
 
-    length: float  # tip-to-tip length along the smoothed geodesic path, units of ``coords``
+    path_length: float  # skeleton tip to skeleton tip along the smoothed geodesic path, units of ``coords``
     graph_length: float  # geodesic diameter in the 8-connected graph (staircase-biased, up to +8 %)
     endpoints: tuple[tuple[int, int], tuple[int, int]]  # (row, col) of the two tips
     path: np.ndarray  # (K, 2) int (row, col) skeleton pixels from tip to tip
     n_pixels: int  # skeleton pixels in the component
+    pixels: np.ndarray  # (n_pixels, 2) int (row, col) of every skeleton pixel of the component
     exact: bool  # False: looped component whose sweep budget ran out (lower bound, see module doc)
 
 
@@ -247,20 +251,23 @@ def crack_components(
     step_px: int = 4,
     max_sweeps: int = 64,
     is_skeleton: bool = False,
+    graph: SkeletonGraph | None = None,
 ) -> list[CrackComponent]:
     """Geodesic diameter of every 8-connected skeleton component of ``mask``.
 
     ``coords``: None (pixels), metres per pixel, or an (H, W, 3) point array (NaN = invalid).
     ``step_px``: polyline step along the geodesic path (see module doc; 1 = raw graph length).
     ``max_sweeps``: Dijkstra budget per looped component (see ``_bounding_diameter``).
-    ``is_skeleton=True`` skips skeletonisation when the caller already has one.
-    Components are returned longest first.
+    ``is_skeleton=True`` skips skeletonisation when the caller already has one; ``graph``
+    reuses that skeleton's ``skeleton_graph(mask, coords)``.
+    Components are returned longest first.  The skeleton stops short of the mask's tips:
+    ``fusion.crack_measure`` adds the missing ends.
     """
     if int(step_px) != step_px or step_px < 1:
         raise CrackLengthError(f"step_px must be an integer >= 1, got {step_px!r}")
     m = _as_mask(mask)
     skel = m if is_skeleton else skeletonize(m)
-    g = skeleton_graph(skel, coords)
+    g = graph if graph is not None else skeleton_graph(skel, coords)
     n = g.rows.size
     if n == 0:
         return []
@@ -276,14 +283,17 @@ def crack_components(
     d2, pred, _ = _sweep_all(g.graph, a)
     b = _group_argmax(d2, labels, n_comp)
 
+    order = np.argsort(labels, kind="stable")
+    starts = np.r_[0, np.cumsum(n_nodes)]
     out: list[CrackComponent] = []
     for k in range(n_comp):
+        members = order[starts[k]:starts[k + 1]]
         exact = True
         if is_tree[k]:
             length, ia, ib = float(d2[b[k]]), int(a[k]), int(b[k])
             path = _path(pred, ia, ib)
         else:
-            nodes = np.nonzero(labels == k)[0]
+            nodes = members
             sub = g.graph[nodes][:, nodes].tocsr()
             start = int(np.searchsorted(nodes, a[k]))  # the first sweep's far end: a good start
             length, la, lb, exact = _bounding_diameter(sub, start, int(max_sweeps))
@@ -294,34 +304,17 @@ def crack_components(
         graph_length = max(float(length), 0.0)
         out.append(
             CrackComponent(
-                length=graph_length if step_px == 1 else _polyline_length(pix[:, 0], pix[:, 1], coords, step_px),
+                path_length=graph_length if step_px == 1 else _polyline_length(pix[:, 0], pix[:, 1], coords, step_px),
                 graph_length=graph_length,
                 endpoints=((int(g.rows[ia]), int(g.cols[ia])), (int(g.rows[ib]), int(g.cols[ib]))),
                 path=pix,
                 n_pixels=int(n_nodes[k]),
+                pixels=np.stack([g.rows[members], g.cols[members]], axis=1),
                 exact=exact,
             )
         )
-    out.sort(key=lambda c: c.length, reverse=True)
+    out.sort(key=lambda c: c.path_length, reverse=True)
     return out
-
-
-def crack_length(
-    mask: np.ndarray,
-    coords: float | np.ndarray | None = None,
-    *,
-    min_length: float = 0.0,
-    step_px: int = 4,
-    is_skeleton: bool = False,
-) -> float:
-    """Total crack length: the sum over skeleton components of their geodesic diameters.
-
-    Each connected crack counts with its tip-to-tip length (side branches are not added),
-    matching the thesis' per-crack definition; components shorter than ``min_length``
-    (same units as ``coords``) are ignored, e.g. to drop speckle in predicted masks.
-    """
-    comps = crack_components(mask, coords, step_px=step_px, is_skeleton=is_skeleton)
-    return float(sum(c.length for c in comps if c.length >= min_length))
 
 
 def skeleton_length(

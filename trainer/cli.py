@@ -1,4 +1,4 @@
-"""``cracktrain``: train, evaluate, predict, compare sim-to-real, split, benchmark.
+"""``cracktrain``: train, evaluate, predict, compare sim-to-real, split, benchmark, fuse images.
 
 Every subcommand exits non-zero with a one-line reason on bad input
 (missing folder, no images, unreadable file, bad checkpoint).
@@ -18,6 +18,7 @@ from trainer.errors import TrainerInputError
 def build_parser() -> argparse.ArgumentParser:
     from trainer.bench import add_bench_args
     from trainer.evaluate import add_eval_args
+    from trainer.fuse_images import add_fuse_args
     from trainer.predict import add_predict_args
     from trainer.sim2real import add_sim2real_args
     from trainer.split import add_split_args
@@ -29,11 +30,12 @@ def build_parser() -> argparse.ArgumentParser:
     for name, adder, help_ in (
         ("seg", add_seg_args, "train a segmentation model (thesis defaults: DeepLabV3-R50, Adam 1e-4, batch 16, 30 epochs)"),
         ("evaluate", add_eval_args, "dataset-level metrics + PR curve of a checkpoint"),
-        ("predict", add_predict_args, "masks, overlays and crack length for real photos"),
+        ("predict", add_predict_args, "masks, overlays and crack length/width (px or metres) for real photos"),
         ("sim2real", add_sim2real_args,
          "synthetic (+ adaptation) vs real vs mixed vs fine-tune, or the label-efficiency curve, on real test data"),
         ("split", add_split_args, "deterministic train/test split of a real folder"),
         ("bench", add_bench_args, "loader samples/s and model step time"),
+        ("fuse-images", add_fuse_args, "guided-filter fusion of an exposure or focus stack; prints Q_Y, Q_C, Q_G, Q_MI"),
     ):
         adder(sub.add_parser(name, help=help_, description=help_))
     return p
@@ -77,6 +79,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             s = run_split(args)
             print(f"{len(s['train'])} train / {len(s['test'])} test -> {args.out}")
+        elif args.command == "fuse-images":
+            from trainer.fuse_images import run_fuse
+
+            r = run_fuse(args)
+            print(f"Q_Y {r['Q_Y']:.4f}  Q_C {r['Q_C']:.4f}  Q_G {r['Q_G']:.4f}  Q_MI {r['Q_MI']:.4f}")
+            print(f"fused {r['inputs']} images ({r['levels']}-level) -> {r['out']}")
         elif args.command == "bench":
             from trainer.bench import format_bench, run_bench
 

@@ -45,6 +45,7 @@ from crackgen.sim.sensors import sensor_rng
 from crackgen.sim.sensors.lidar import simulate_lidar
 from crackgen.sim.sensors.stereo import simulate_stereo
 from crackgen.sim.sensors.tof import albedo_from_map, simulate_tof
+from crackgen.sim.visible_gt import visible_ground_truth
 
 STAGES = ("spec", "crackmap", "surface", "materials", "shadow", "scene_update", "render",
           "raycast", "groundtruth", "tof", "lidar", "stereo", "camera_effects", "adapt")
@@ -191,6 +192,8 @@ class SampleProducer:
             label = view_label(self.recipe.label, cm, gt, out.rgb, attempt)
         if label.redraw:
             return None
+        with tm.stage("groundtruth"):
+            visible = visible_ground_truth(cm, rig.rgb, gt.uv)
         members: dict[str, Any] = {
             "rgb.png": out.rgb,
             "mask.png": label.mask,
@@ -254,6 +257,7 @@ class SampleProducer:
                 "pixel_fraction": crack_pixel_fraction(label.mask),
             },
             "label": label.meta,
+            "visible": visible,
             "material": {"family": spec.material.family, "distractors": [d.kind for d in spec.material.distractors],
                          "clutter": [c.kind for c in spec.material.clutter], "photo": maps.photo},
             "lights": [{"kind": L.kind, "elevation_deg": float(np.degrees(L.elevation_rad))} for L in spec.lights],

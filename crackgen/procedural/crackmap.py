@@ -34,7 +34,7 @@ from crackgen.procedural.crack_shapes.hairline import DEPTH_SCALE, hairline_widt
 from crackgen.procedural.crack_shapes.network import network_paths
 from crackgen.procedural.crack_shapes.paths import MIN_HALF_WIDTH_PX, render_paths, to_texels
 from crackgen.procedural.noise import fbm
-from fusion.crack_length import crack_length, skeleton
+from fusion.crack_length import crack_components, skeleton
 
 __all__ = ["CrackMapError", "CrackMap", "crack_map", "texel_centres", "mask_at_uv", "nearest_texel", "depth_at_uv"]
 
@@ -52,7 +52,10 @@ class CrackMap:
     disp: np.ndarray  # float32 (N, N), D = M * |Z - t| in [0, t] (unitless; t = threshold or 1)
     depth_m: np.ndarray  # float32 (N, N), displacement into the surface (m) = D / t * centre-line depth
     skeleton: np.ndarray | None  # bool (N, N) one-pixel skeleton of ``mask`` (None if not measured)
-    length_m: float  # GT crack length (m): sum of skeleton geodesic diameters (NaN if not measured)
+    # Whole patch (m): the sum over skeleton components of their skeleton diameters (NaN if not
+    # measured). Not the thesis length, and not what a camera sees: the per-view GT with the
+    # thesis quantities is ``crackgen.sim.visible_gt`` (``visible`` in the sample JSON).
+    length_m: float
     size_m: float  # side of the square surface patch (m)
     spec: CrackSpec  # the parameters that made it
 
@@ -129,7 +132,8 @@ def crack_map(
     length = float("nan")
     if measure:
         skel = skeleton(mask)
-        length = crack_length(skel, float(size_m) / size_px, is_skeleton=True) if mask.any() else 0.0
+        comps = crack_components(skel, float(size_m) / size_px, is_skeleton=True) if mask.any() else []
+        length = float(sum(c.path_length for c in comps))
     return CrackMap(z=z, mask=mask, disp=disp, depth_m=depth, skeleton=skel, length_m=length, size_m=float(size_m), spec=spec)
 
 

@@ -1,4 +1,4 @@
-"""Micro-benchmarks of the numpy core: crack map, skeleton + GT length, surface mesh.
+"""Micro-benchmarks of the numpy core: crack map, skeleton, skeleton diameters, crack measurement, surface mesh.
 
 Run ``python -m crackgen.tools.bench_core [--px 1024] [--grid 384] [--repeat 5]``; prints the
 median seconds per stage (after one warm-up call, so numba compilation is excluded).
@@ -33,7 +33,8 @@ def bench_core(px: int = 1024, grid: int = 384, octaves: int = 6, repeat: int = 
     from crackgen.config.spec import make_spec
     from crackgen.procedural.crackmap import crack_map
     from crackgen.procedural.surface import surface_mesh, surface_vertices
-    from fusion.crack_length import crack_length, skeleton
+    from fusion.crack_length import crack_components, skeleton
+    from fusion.crack_measure import measure_cracks
 
     spec = make_spec(Recipe(), index)
     cs = dataclasses.replace(spec.crack, octaves=octaves)
@@ -43,7 +44,8 @@ def bench_core(px: int = 1024, grid: int = 384, octaves: int = 6, repeat: int = 
     return {
         "crack_map_s": _median_time(lambda: crack_map(cs, px, size, measure=False), repeat),
         "skeleton_s": _median_time(lambda: skeleton(cm.mask), repeat),
-        "length_s": _median_time(lambda: crack_length(skel, size / px, is_skeleton=True), repeat),
+        "length_s": _median_time(lambda: crack_components(skel, size / px, is_skeleton=True), repeat),
+        "measure_s": _median_time(lambda: measure_cracks(cm.mask, size / px), repeat),
         "surface_vertices_s": _median_time(lambda: surface_vertices(cm, grid), repeat),
         "surface_mesh_s": _median_time(lambda: surface_mesh(cm, grid), repeat),
     }

@@ -1,4 +1,4 @@
-"""`crackgen` command line: generate, validate, inspect, bench, show, verify, export, adapt, stats.
+"""`crackgen` command line: generate, validate, inspect, bench, show, verify, export, adapt, stats, measure-check.
 
 Each subcommand imports its heavy modules lazily so `crackgen --help` and
 `crackgen validate` stay fast. Bad input exits 1 with one line per problem; a run
@@ -193,6 +193,19 @@ def _cmd_stats(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_measure_check(args: argparse.Namespace) -> int:
+    from crackgen.tools.measure_check import MeasureCheckError, format_check, measure_check, write_json
+
+    try:
+        result = measure_check(args.path, limit=args.limit, progress=not args.no_progress)
+        print(format_check(result))
+        if args.json:
+            print(f"wrote {write_json(result, args.json)}")
+    except MeasureCheckError as exc:
+        return _err(str(exc))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     from crackgen.datagen.backends import BACKENDS  # the --backend choices (registry keys)
 
@@ -287,6 +300,14 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--limit", type=int, default=None, help="at most this many images")
     st.add_argument("--no-progress", action="store_true", help="no progress bar")
     st.set_defaults(func=_cmd_stats)
+
+    mc = sub.add_parser("measure-check", help="crack length/width measured from each rendered mask + depth + K "
+                                              "against the sample's 'visible' GT: median and p90 relative error")
+    mc.add_argument("path", metavar="DIR", help="a crackgen dataset (e.g. made from recipes/measure.toml)")
+    mc.add_argument("--json", default=None, metavar="OUT", help="also write per-sample figures and the summary as JSON")
+    mc.add_argument("--limit", type=int, default=None, help="at most this many samples")
+    mc.add_argument("--no-progress", action="store_true", help="no progress bar")
+    mc.set_defaults(func=_cmd_measure_check)
     return p
 
 

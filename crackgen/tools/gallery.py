@@ -183,7 +183,8 @@ def _params(meta: dict[str, Any], sample: dict[str, Any]) -> dict[str, Any]:
         "cam_dist_m": cam.get("distance_m"),
         "tilt_deg": math.degrees(cam["tilt_rad"]) if "tilt_rad" in cam else None,
         "focal_mm": cam.get("focal_mm"),
-        "crack_len_m": crack.get("length_m"),
+        "crack_len_m": crack.get("length_m"),  # whole patch: sum of skeleton diameters
+        "visible_len_m": (meta.get("visible") or {}).get("longest_path_m"),  # thesis length of the part in view
         "crack_px_frac": crack.get("pixel_fraction"),
         "adapt": _adapt_label(meta.get("adapt") or {}),
         "camera_fx": _camfx_label(meta.get("camera_effects") or {}),
@@ -300,7 +301,8 @@ def _summary_html(entries: list[_Entry]) -> str:
         svg_histogram(col("crack_px_frac"), "crack-pixel fraction"),
         svg_histogram(col("tof_fill"), "ToF fill ratio (RGB view)"),
         svg_histogram(col("lidar_fill"), "LiDAR fill ratio (RGB view)"),
-        svg_histogram(col("crack_len_m"), "GT crack length (m)"),
+        svg_histogram(col("crack_len_m"), "GT crack length, whole patch (m)"),
+        svg_histogram(col("visible_len_m"), "GT longest crack path in view (m)"),
         svg_histogram(col("cam_dist_m"), "camera distance (m)"),
         svg_histogram(col("tilt_deg"), "camera tilt (deg)"),
         svg_counts(counts("family"), "material family"),

@@ -62,6 +62,11 @@ def test_meta_has_spec_cameras_and_timings_stay_out_of_it(produced):
     assert all(v >= 0 for v in timings.values())
     assert "timings" not in meta  # run-dependent: would make two runs' shards differ
     assert meta["crack"]["length_m"] > 0 and meta["material"]["family"] == spec.material.family
+    vis = meta["visible"]  # GT size of the crack in view: at most the whole patch's
+    assert vis["label"] == "thesis" and vis["unit"] == "m"
+    if vis["texels"]:
+        # polyline (longest path) and step-corrected (total) lengths differ by up to ~2 % on one branch
+        assert 0 < vis["longest_path_m"] <= 1.05 * vis["total_length_m"] <= 1.5 * meta["crack"]["length_m"]
     import json
 
     json.dumps(meta, allow_nan=False)  # strict JSON

@@ -8,11 +8,16 @@ from scipy.sparse import csgraph
 from fusion.crack_length import (
     CrackLengthError,
     crack_components,
-    crack_length,
     skeleton,
     skeleton_graph,
     skeleton_length,
 )
+from fusion.crack_measure import measure_cracks
+
+
+def crack_length(mask, coords=None, *, min_length=0.0, step_px=4):
+    """Sum of the skeleton diameters of the components (what the skeleton alone measures)."""
+    return sum(c.path_length for c in crack_components(mask, coords, step_px=step_px) if c.path_length >= min_length)
 
 
 def _blank(h=120, w=120):
@@ -106,7 +111,7 @@ def test_ring_is_half_circumference_and_sweeps_agree():
     approx = crack_components(m, max_sweeps=3)
     assert exact[0].exact and not approx[0].exact
     assert approx[0].graph_length == pytest.approx(exact[0].graph_length)
-    assert exact[0].length == pytest.approx(np.pi * 60, rel=0.02)
+    assert exact[0].path_length == pytest.approx(np.pi * 60, rel=0.02)
 
 
 def test_tilted_plane_3d_coords():
@@ -171,15 +176,17 @@ def test_empty_and_dtypes():
     m = _blank()
     m[5, 5] = 1
     (c,) = crack_components(m)
-    assert c.length == 0.0 and c.n_pixels == 1
+    assert c.path_length == 0.0 and c.n_pixels == 1
 
 
 def test_bad_inputs():
     with pytest.raises(CrackLengthError, match="mask must be a 2-D"):
-        crack_length(np.zeros((4, 4, 3)))
+        crack_components(np.zeros((4, 4, 3)))
     with pytest.raises(CrackLengthError, match="coords"):
-        crack_length(np.ones((4, 4)), np.zeros((5, 4, 3)))
+        crack_components(np.ones((4, 4)), np.zeros((5, 4, 3)))
     with pytest.raises(CrackLengthError, match="pixel size"):
-        crack_length(np.ones((4, 4)), -0.1)
+        crack_components(np.ones((4, 4)), -0.1)
     with pytest.raises(CrackLengthError, match="step_px"):
-        crack_length(np.ones((4, 4)), step_px=0)
+        crack_components(np.ones((4, 4)), step_px=0)
+    with pytest.raises(CrackLengthError, match="coords"):
+        measure_cracks(np.ones((4, 4)), np.zeros((4, 4, 2)))

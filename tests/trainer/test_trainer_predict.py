@@ -62,3 +62,45 @@ def test_predict_skip_bad_with_nothing_readable_fails_with_report(tmp_path, caps
     assert rc == 2 and "report.json" in capsys.readouterr().err
     rep = json.loads((out / "report.json").read_text())
     assert rep["predicted"] == [] and len(rep["skipped"]) == 1
+
+
+def test_predict_intrinsics_and_depth_give_metres(tmp_path, capsys):
+    ckpt = _untrained_checkpoint(tmp_path / "untrained.pt")
+    root = tmp_path / "site"
+    (root / "images").mkdir(parents=True)
+    (root / "depth").mkdir()
+    cv2.imwrite(str(root / "images" / "a.png"), np.full((32, 48, 3), 120, np.uint8))
+    cv2.imwrite(str(root / "depth" / "a.png"), np.full((32, 48), 1500, np.uint16))  # 1.5 m in mm
+    K = tmp_path / "K.json"
+    K.write_text(json.dumps({"fx": 600.0, "fy": 600.0, "cx": 23.5, "cy": 15.5}))
+    out = tmp_path / "pred"
+    rc = main(["predict", str(root), "-c", str(ckpt), "--out", str(out), "--threshold", "0.0", "--no-progress",
+               "--intrinsics", str(K), "--real-depth-dir", "depth", "--real-depth-scale", "0.001"])
+    assert rc == 0
+    rep = json.loads((out / "a.json").read_text())
+    # threshold 0: the whole 48 x 32 image is crack; a fronto-parallel plane at 1.5 m with f = 600 px
+    # has 2.5 mm pixels: the longest path lies between the long side (47 px between pixel centres)
+    # and the diagonal.
+    assert rep["length_unit"] == "m"
+    assert 0.0025 * 47 * 0.99 <= rep["crack_length"] <= 0.0025 * np.hypot(47, 31)
+    assert rep["crack_length"] == rep["measurement"]["longest_path"]
+    assert set(rep["measurement"]) >= {"longest_path", "total_length", "mean_width", "max_width"}
+    # --intrinsics without depth: one line naming the image
+    rc = main(["predict", str(root), "-c", str(ckpt), "--out", str(out), "--no-progress", "--intrinsics", str(K)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "needs depth" in err[0]
+
+
+def test_predict_on_shards_uses_each_samples_depth_and_k(tmp_path):
+    from crackgen.shards import ShardWriter, sample_key
+
+    ckpt = _untrained_checkpoint(tmp_path / "untrained.pt")
+    K = [[600.0, 0, 23.5], [0, 600.0, 15.5], [0, 0, 1]]
+    with ShardWriter(tmp_path / "ds", 0) as w:
+        w.add(sample_key(0, 0), {"rgb.png": np.full((32, 48, 3), 90, np.uint8), "mask.png": np.zeros((32, 48), np.uint8),
+                                 "depth.exr": np.full((32, 48), 1.5, np.float32), "json": {"cameras": {"rgb": {"K": K}}}})
+    out = tmp_path / "pred"
+    assert main(["predict", str(tmp_path / "ds"), "-c", str(ckpt), "--out", str(out), "--threshold", "0.0",
+                 "--no-progress"]) == 0
+    rep = json.loads((out / "000000-00000.json").read_text())
+    assert rep["length_unit"] == "m" and 0.0025 * 47 * 0.99 <= rep["crack_length"] <= 0.0025 * np.hypot(47, 31)
