@@ -36,7 +36,16 @@ import torch
 
 from trainer.builders import add_data_args, eval_loader, real_folder, sample_config_from_args
 from trainer.checkpoint import load_checkpoint
-from trainer.curve import CurvePoint, headline, nested_subsets, parse_sizes, plot_curve, read_csv, summarise, table_lines
+from trainer.curve import (
+    CurvePoint,
+    headline,
+    nested_subsets,
+    parse_sizes,
+    plot_curve,
+    read_csv,
+    summarise,
+    table_lines,
+)
 from trainer.curve import write_csv as write_curve_csv
 from trainer.errors import TrainerInputError
 from trainer.evaluate import load_model
