@@ -5,7 +5,9 @@ weighted rule, and the max-fused map after BM3D; ``--all-filters`` adds BM3D
 before fusion and CLAHE before/after (the thesis's other settings). Columns:
 MSE, MAE, RMSE (px), % of pixels with error > 1/2/3/5 px, density. Per-scene
 metrics are averaged over scenes. By default the scenes are the checkpoint's
-held-out keys, so the table never scores training data.
+held-out keys, so the table never scores training data. ``--real-stereo``
+scores a LiDAR model on real stereo pairs with a LiDAR simulated from their GT
+(``trainer.fusion_real``).
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ from fusion.postfilter import PostFilter
 from trainer.errors import TrainerInputError
 from trainer.fusion_apply import fuse_scene, load_fusion_model
 from trainer.fusion_data import load_shard_scenes, shard_keys
+from trainer.fusion_real import add_real_args, real_scene
 
 
 def add_fusion_eval_args(p: argparse.ArgumentParser) -> None:
@@ -39,6 +42,7 @@ def add_fusion_eval_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default=None)
     p.add_argument("--threads", type=int, default=0)
     p.add_argument("--no-progress", action="store_true")
+    add_real_args(p)
 
 
 def evaluate_scene(model, cfg, scene, device, filters: dict[str, PostFilter]) -> dict[str, dict[str, float]]:
@@ -60,17 +64,23 @@ def run_fusion_eval(args: argparse.Namespace) -> dict[str, Any]:
         torch.set_num_threads(args.threads)
     device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
     model, cfg, ckpt = load_fusion_model(args.ckpt, device)
-    data = args.data or ckpt["args"].get("data")
-    if data is None:
-        raise TrainerInputError("give --data: the checkpoint does not name its data")
-    keys = ckpt.get("val_keys") if args.keys == "val" else shard_keys(data)
-    if not keys:
-        raise TrainerInputError(f"checkpoint {args.ckpt} holds no held-out keys (trained with --val-fraction 0): "
-                                "use --keys all with other --data")
-    stereo_dir = args.stereo_dir or ckpt["args"].get("stereo_dir")
-    other_dir = args.other_dir or ckpt["args"].get("other_dir")
-    scenes = load_shard_scenes(data, cfg["variant"], keys=keys, densify=cfg["densify"], stereo_dir=stereo_dir,
-                               other_dir=other_dir, progress=not args.no_progress)
+    if args.real_stereo:
+        if cfg["variant"] != "lidar":
+            raise TrainerInputError(f"--real-stereo simulates a LiDAR: {args.ckpt} is a {cfg['variant']} model")
+        data = ", ".join(str(Path(f).name) for f in args.real_stereo)
+        scenes = [real_scene(f, args, cfg["densify"]) for f in args.real_stereo]
+    else:
+        data = args.data or ckpt["args"].get("data")
+        if data is None:
+            raise TrainerInputError("give --data: the checkpoint does not name its data")
+        keys = ckpt.get("val_keys") if args.keys == "val" else shard_keys(data)
+        if not keys:
+            raise TrainerInputError(f"checkpoint {args.ckpt} holds no held-out keys (trained with --val-fraction 0): "
+                                    "use --keys all with other --data")
+        stereo_dir = args.stereo_dir or ckpt["args"].get("stereo_dir")
+        other_dir = args.other_dir or ckpt["args"].get("other_dir")
+        scenes = load_shard_scenes(data, cfg["variant"], keys=keys, densify=cfg["densify"], stereo_dir=stereo_dir,
+                                   other_dir=other_dir, progress=not args.no_progress)
     filters = {"fused, max + BM3D after": PostFilter("bm3d", "after", args.bm3d_sigma)}
     if args.all_filters:
         filters.update({"BM3D before, fused max": PostFilter("bm3d", "before", args.bm3d_sigma),
@@ -82,7 +92,7 @@ def run_fusion_eval(args: argparse.Namespace) -> dict[str, Any]:
     rows = list(next(iter(per_scene.values())))
     mean = {r: average_metrics(per_scene[k][r] for k in per_scene) for r in rows}
     table = format_table(mean)
-    res = {"data": str(data), "keys": args.keys, "scenes": len(scenes), "variant": cfg["variant"],
+    res = {"data": str(data), "keys": "real" if args.real_stereo else args.keys, "scenes": len(scenes), "variant": cfg["variant"],
            "ckpt": str(args.ckpt), "mean": mean, "per_scene": per_scene, "table": table}
     if args.out:
         out = Path(args.out)

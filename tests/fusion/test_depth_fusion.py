@@ -115,3 +115,17 @@ def test_inputs_have_the_variant_channels_and_dense_candidates():
         build_inputs("tof", stereo, tof, left, right, None)
     with pytest.raises(FusionInputError):
         build_inputs("lidar", stereo, tof[:10], left, right)
+
+
+def test_scanline_lidar_samples_the_gt_on_evenly_spaced_rows():
+    from fusion.scanline_lidar import scanline_lidar
+
+    gt = np.full((50, 30), 12.0, np.float32)
+    gt[:, :3] = -1.0  # no GT: no return
+    lid = scanline_lidar(gt, 5, np.random.default_rng(0), sigma_px=0.0, dropout=0.0)
+    rows = np.flatnonzero((lid > 0).any(axis=1))
+    np.testing.assert_array_equal(rows, [0, 12, 24, 37, 49])
+    assert (lid[rows][:, 3:] == 12.0).all() and (lid[:, :3] == -1).all()
+    noisy = scanline_lidar(gt, 5, np.random.default_rng(0), sigma_px=0.5, dropout=0.5)
+    hit = noisy > 0
+    assert 0.3 < hit[rows][:, 3:].mean() < 0.7 and 0.3 < np.std(noisy[hit] - 12.0) < 0.7

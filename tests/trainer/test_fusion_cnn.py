@@ -8,6 +8,7 @@ ToF that is noisy where its amplitude is low, so confidence is learnable.
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -150,3 +151,20 @@ def test_a_few_training_steps_reduce_the_loss_then_eval_and_fuse(fusion_shards, 
     assert (tmp_path / "fused" / "fused_max.exr").is_file() and "| fused_max |" in capsys.readouterr().out
     assert cli_main([str(tmp_path / "nope.npy") if a == str(files["gt"]) else a for a in argv]) == 2
     assert "nope.npy" in capsys.readouterr().err
+
+
+REAL_CONES = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real" / "stereo" / "middlebury2003_cones"
+
+
+@pytest.mark.skipif(not REAL_CONES.is_dir(), reason="../shared/data/real is absent")
+def test_real_stereo_scene_has_lidar_inputs_and_gt():
+    from trainer.fusion_real import real_scene
+
+    args = argparse.Namespace(lidar_lines=16, lidar_sigma_px=0.25, lidar_dropout=0.1, seed=0)
+    s = real_scene(REAL_CONES, args, "normconv")
+    assert s.x.shape == (375, 450, 3) and s.gt.shape == (375, 450)
+    assert (s.x[..., 0] > 0).all() and (s.x[..., 1] > 0).all()  # both candidates dense
+    ok = s.gt > 0
+    assert np.median(np.abs(s.x[..., 1] - s.gt)[ok]) < 1.0  # interpolated scan lines follow the GT
+    with pytest.raises(TrainerInputError, match="neither"):
+        real_scene(REAL_CONES.parent, args, "normconv")
