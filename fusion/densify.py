@@ -5,29 +5,25 @@
 mean of the measured pixels at the smallest scale where they weigh at least
 5%. It is a few OpenCV blurs per map, so scenes are prepared in milliseconds.
 
-``linear`` is exact on planes but slow on dense grids of measured pixels
-(Qhull's point location on a degenerate triangulation takes seconds).
+Delaunay-linear interpolation (scipy) was tried and dropped: measured pixels
+lie on the integer grid, the triangulation is full of degenerate triangles,
+and point location took 5-100 s per 256x192 map here.
 
 Why densify: the confidence CNN and the fusion rules compare two candidate values at
 every pixel, but LiDAR (a few % of pixels) and a reprojected low-resolution
-ToF leave holes. Linear interpolation over the Delaunay triangulation of the
-measured pixels (scipy ``LinearNDInterpolator``) fills inside their hull;
-nearest-neighbour fills outside it. Queries are nudged by ~1e-3 px off the
-integer grid: a query exactly on a triangle edge (common when the measured
-pixels lie on a grid) makes Qhull's point location ~100x slower. A stronger completion (e.g. PENet) plugs in instead by
+ToF leave holes; ``nearest`` (distance transform) is the cheapest fill and
+also the fallback where no scale reaches a hole. A stronger completion (e.g. PENet) plugs in instead by
 passing its dense map from a file (see ``trainer.fusion_data``).
 """
 from __future__ import annotations
 
 import cv2
 import numpy as np
-from scipy.interpolate import LinearNDInterpolator
 from scipy.ndimage import distance_transform_edt
 
-METHODS = ("normconv", "linear", "nearest")
+METHODS = ("normconv", "nearest")
 NORMCONV_SIGMAS_PX = (1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0)
 NORMCONV_MIN_SUPPORT = 0.05  # Gaussian-weighted fraction of measured pixels a scale needs to fill a pixel
-_NUDGE = (1.13e-3, 0.71e-3)  # px; off-grid so queries avoid triangle edges
 
 
 class DensifyError(ValueError):
@@ -73,8 +69,8 @@ def normalized_convolution(a: np.ndarray, ok: np.ndarray) -> np.ndarray:
 
 
 def interpolate_sparse(sparse: np.ndarray, method: str = "normconv") -> np.ndarray:
-    """Dense float32 map from a sparse one: ``method`` inside the hull of the measured pixels,
-    nearest outside it. Measured pixels keep their values. All -1 if nothing is measured."""
+    """Dense float32 map from a sparse one (``normconv`` or ``nearest``). Measured pixels keep
+    their values. All -1 if nothing is measured."""
     if method not in METHODS:
         raise DensifyError(f"unknown densify method {method!r}; choose from {', '.join(METHODS)}")
     a = np.asarray(sparse, dtype=np.float32)
@@ -83,16 +79,4 @@ def interpolate_sparse(sparse: np.ndarray, method: str = "normconv") -> np.ndarr
     ok = valid_values(a)
     if method == "nearest" or ok.sum() < 3 or ok.all():
         return fill_nearest(a, ok)
-    if method == "normconv":
-        return normalized_convolution(a, ok)
-    pts = np.argwhere(ok).astype(np.float64)
-    grid_r, grid_c = np.nonzero(~ok)
-    query = np.column_stack([grid_r + _NUDGE[0], grid_c + _NUDGE[1]])
-    try:
-        vals = LinearNDInterpolator(pts, a[ok])(query)
-    except Exception:  # degenerate layouts (all points on one line): Qhull cannot triangulate
-        return fill_nearest(a, ok)
-    out = fill_nearest(a, ok)
-    inside = np.isfinite(vals)
-    out[grid_r[inside], grid_c[inside]] = vals[inside]
-    return out
+    return normalized_convolution(a, ok)

@@ -63,19 +63,19 @@ def test_metrics_on_a_hand_made_map():
     assert math.isnan(empty["mae"]) and empty["density"] == 0.0
 
 
-@pytest.mark.parametrize("method", ["normconv", "linear", "nearest"])
+@pytest.mark.parametrize("method", ["normconv", "nearest"])
 def test_densify_fills_holes_and_keeps_measurements(method):
     yy, xx = np.mgrid[:40, :50]
     plane = (20 + 0.1 * xx + 0.05 * yy).astype(np.float32)
-    sparse = np.full_like(plane, -1.0)
-    sparse[::3, ::2] = plane[::3, ::2]
+    measured = np.random.default_rng(0).random(plane.shape) < 0.2
+    sparse = np.where(measured, plane, -1.0).astype(np.float32)
     dense = interpolate_sparse(sparse, method)
     assert (dense > 0).all()
-    np.testing.assert_array_equal(dense[::3, ::2], plane[::3, ::2])
-    tol = 0.3 if method == "nearest" else 0.15
+    np.testing.assert_array_equal(dense[measured], plane[measured])
+    tol = 0.3 if method == "nearest" else 0.1
     assert np.abs(dense - plane).mean() < tol
     with pytest.raises(DensifyError):
-        interpolate_sparse(sparse, "cubic")
+        interpolate_sparse(sparse, "linear")
 
 
 def test_bm3d_denoises_a_plane_and_clahe_keeps_holes():
