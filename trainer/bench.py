@@ -1,5 +1,7 @@
 """``cracktrain bench``: loader throughput and model step time, for issue notes.
 
+``--fusion tof|lidar`` times the depth-fusion confidence CNN instead.
+
 Loader: samples/s through the same SegStream + DataLoader as training (with
 augmentation), for each requested worker count. Model: mean time of one
 forward+backward+Adam step at the given size and batch (after warm-up).
@@ -34,6 +36,8 @@ def add_bench_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true")
     p.add_argument("--no-model", action="store_true")
+    p.add_argument("--fusion", choices=("tof", "lidar"), default=None,
+                   help="time the confidence CNN of the depth fusion (Adadelta, masked MSE) instead of --arch")
     add_data_args(p)
 
 
@@ -76,6 +80,34 @@ def bench_model(arch: str, in_channels: int, size: int, batch: int, steps: int, 
             "step_s_min": round(min(times), 4), "params_M": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
 
 
+def bench_fusion_model(variant: str, size: int, batch: int, steps: int, device: torch.device) -> dict[str, Any]:
+    """One training step of the confidence CNN (thesis: batch 32, 128-px patches)."""
+    from trainer.confidence_cnn import IN_CHANNELS, ConfidenceCNN
+    from trainer.fusion_train import masked_mse
+
+    torch.manual_seed(0)
+    model = ConfidenceCNN(IN_CHANNELS[variant]).to(device).train()
+    opt = torch.optim.Adadelta(model.parameters(), lr=0.01)
+    x = torch.randn(batch, IN_CHANNELS[variant], size, size, device=device)
+    y = torch.rand(batch, 2, size, size, device=device)
+    times = []
+    for i in range(steps + 1):
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        t0 = time.perf_counter()
+        loss = masked_mse(model(x), y)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        if i > 0:  # first step is warm-up
+            times.append(time.perf_counter() - t0)
+    return {"arch": f"confidence_cnn_{variant}", "in_channels": IN_CHANNELS[variant], "size": size, "batch": batch,
+            "device": str(device), "threads": torch.get_num_threads(), "step_s_mean": round(sum(times) / len(times), 4),
+            "step_s_min": round(min(times), 4), "params_M": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
+
+
 def run_bench(args: argparse.Namespace) -> dict[str, Any]:
     cfg = sample_config_from_args(args)
     res: dict[str, Any] = {"loader": [], "model": None}
@@ -89,6 +121,9 @@ def run_bench(args: argparse.Namespace) -> dict[str, Any]:
         raise TrainerInputError("nothing to benchmark: give --data/--real or drop --no-model")
     if not args.no_model:
         device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+        if args.fusion:
+            res["model"] = bench_fusion_model(args.fusion, args.model_size, args.batch_size, args.steps, device)
+            return res
         res["model"] = bench_model(args.arch, cfg.in_channels, args.model_size, args.batch_size, args.steps, device)
     return res
 

@@ -1,4 +1,4 @@
-"""``cracktrain``: train, evaluate, predict, compare sim-to-real, split, benchmark, fuse images.
+"""``cracktrain``: train, evaluate, predict, compare sim-to-real, fuse depth, fuse images, split, benchmark.
 
 Every subcommand exits non-zero with a one-line reason on bad input
 (missing folder, no images, unreadable file, bad checkpoint).
@@ -18,7 +18,10 @@ from trainer.errors import TrainerInputError
 def build_parser() -> argparse.ArgumentParser:
     from trainer.bench import add_bench_args
     from trainer.evaluate import add_eval_args
-    from trainer.fuse_images import add_fuse_args
+    from trainer.fuse_images import add_fuse_args as add_fuse_images_args
+    from trainer.fusion_apply import add_fuse_args
+    from trainer.fusion_eval import add_fusion_eval_args
+    from trainer.fusion_train import add_fusion_args
     from trainer.predict import add_predict_args
     from trainer.sim2real import add_sim2real_args
     from trainer.split import add_split_args
@@ -33,9 +36,12 @@ def build_parser() -> argparse.ArgumentParser:
         ("predict", add_predict_args, "masks, overlays and crack length/width (px or metres) for real photos"),
         ("sim2real", add_sim2real_args,
          "synthetic (+ adaptation) vs real vs mixed vs fine-tune, or the label-efficiency curve, on real test data"),
+        ("fusion", add_fusion_args, "train the ToF/LiDAR-stereo confidence CNN (thesis: Adadelta 0.01, batch 32, 128 px)"),
+        ("fuse", add_fuse_args, "fuse a stereo and a ToF/LiDAR disparity file with a trained confidence CNN"),
+        ("fusion-eval", add_fusion_eval_args, "thesis-style table: stereo, ToF/LiDAR, fused max/weighted, + BM3D"),
         ("split", add_split_args, "deterministic train/test split of a real folder"),
         ("bench", add_bench_args, "loader samples/s and model step time"),
-        ("fuse-images", add_fuse_args, "guided-filter fusion of an exposure or focus stack; prints Q_Y, Q_C, Q_G, Q_MI"),
+        ("fuse-images", add_fuse_images_args, "guided-filter fusion of an exposure or focus stack; prints Q_Y, Q_C, Q_G, Q_MI"),
     ):
         adder(sub.add_parser(name, help=help_, description=help_))
     return p
@@ -74,6 +80,32 @@ def main(argv: Sequence[str] | None = None) -> int:
             report = Path(res["out"]) / "curve.md" if args.curve else Path(args.out) / "sim2real.md"
             print(report.read_text())
             print(f"wrote {report.parent}")
+        elif args.command == "fusion":
+            from trainer.fusion_train import main as fusion_main
+
+            res = fusion_main(args)
+            b = res["best"]
+            best = (f"; best held-out fused-max MAE {b['val_mae_fused_max']:.4f} px at step {b['step']} "
+                    f"(stereo {b['val_mae_stereo']:.4f}, other {b['val_mae_other']:.4f})") if "step" in b else ""
+            print(f"trained {res['step']} steps on {res['train']} scenes ({res['val']} held out) in {res['seconds']} s"
+                  f"{best}; wrote {res['out']}/last.pt, best.pt, log.csv")
+        elif args.command == "fuse":
+            from fusion.depth_metrics import format_table
+            from trainer.fusion_apply import run_fuse
+
+            res = run_fuse(args)
+            if "metrics" in res:
+                print(format_table(res["metrics"]))
+            print(f"wrote {', '.join(res['written'])} to {res['out']}")
+        elif args.command == "fusion-eval":
+            from trainer.fusion_eval import run_fusion_eval
+
+            res = run_fusion_eval(args)
+            print(f"{res['variant']} fusion, {res['scenes']} {'held-out ' if res['keys'] == 'val' else ''}scenes of "
+                  f"{res['data']} (disparity px, mean over scenes)")
+            print(res["table"])
+            if args.out:
+                print(f"wrote {args.out}/metrics.json and table.md")
         elif args.command == "split":
             from trainer.split import run_split
 

@@ -203,7 +203,7 @@ class SampleProducer:
         if self.recipe.label.policy != "thesis":  # both labels on the same render, to compare
             members["mask_thesis.png"] = label.thesis
         sensors: dict[str, Any] = {}
-        tof = None
+        tof = lidar = None
         if spec.tof.enabled:
             with tm.stage("tof"):
                 tof = simulate_tof(spec.tof, rig, caster, albedo_from_map(maps.albedo), sensor_rng(spec.tof.seed))
@@ -219,13 +219,16 @@ class SampleProducer:
             sensors["lidar"] = {"fill_rgb": fill_ratio(lidar.depth_rgb), "points": int(len(lidar.points_world))}
         if rig.right is not None:
             with tm.stage("stereo"):
-                st = simulate_stereo(spec.stereo, rig, out.rgb, out.right_rgb, gt.depth, tof)
+                st = simulate_stereo(spec.stereo, rig, out.rgb, out.right_rgb, gt.depth, tof,
+                                     None if lidar is None else lidar.depth_rgb)
             members["right.png"] = out.right_rgb
             members["disp_sgm.exr"] = st.disp_sgm
             members["disp_gt.exr"] = st.disp_gt
             if st.disp_tof is not None:  # SYNTH3-style fusion inputs in the left view
                 members["disp_tof.exr"] = st.disp_tof
                 members["tofamp.exr"] = st.tof_amplitude
+            if st.disp_lidar is not None:  # the 3-channel LiDAR/stereo variant's input
+                members["disp_lidar.exr"] = st.disp_lidar
             sensors["stereo"] = {"fill_sgm": fill_ratio(st.disp_sgm), "fill_gt": fill_ratio(st.disp_gt)}
         # post-render image stages: RGB views only, after every sensor has read the clean render
         with tm.stage("camera_effects"):

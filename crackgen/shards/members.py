@@ -84,6 +84,7 @@ _ALL = (
     Member("disp_gt", Codec.EXR_FLOAT, True, doc="GT disparity f·B/Z in the left view (px, -1 none)"),
     Member("disp_tof", Codec.EXR_FLOAT, True, doc="ToF disparity in the left view (px, -1 none)"),
     Member("tofamp", Codec.EXR_FLOAT, True, doc="ToF amplitude in the left view (-1 none)"),
+    Member("disp_lidar", Codec.EXR_FLOAT, True, doc="LiDAR disparity f·B/Z in the left view (px, -1 none)"),
     Member("crackmap", Codec.EXR_FLOAT, False, doc="crack displacement map in surface coordinates (m)"),
     Member(JSON_MEMBER, Codec.JSON, False, doc="SampleSpec, cameras, seeds, GT crack length, timings"),
 )

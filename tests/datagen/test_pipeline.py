@@ -29,7 +29,8 @@ def test_members_follow_the_contract(produced):
     _, samples, _ = produced
     m = samples[0].members
     assert set(m) == {"rgb.png", "mask.png", "mask_thesis.png", "depth.exr", "crackmap.exr", "tof.exr", "tofraw.exr", "lidar.exr",
-                      "right.png", "disp_sgm.exr", "disp_gt.exr", "disp_tof.exr", "tofamp.exr"}
+                      "right.png", "disp_sgm.exr", "disp_gt.exr", "disp_tof.exr", "tofamp.exr",
+                      "disp_lidar.exr"}
     assert m["rgb.png"].shape == (60, 80, 3) and m["rgb.png"].dtype == np.uint8
     assert m["right.png"].shape == (60, 80, 3)
     assert m["mask.png"].dtype == np.uint8 and set(np.unique(m["mask.png"])) <= {0, 255}
@@ -45,6 +46,10 @@ def test_members_follow_the_contract(produced):
     ok = m["disp_tof.exr"] > 0
     assert ok.mean() > 0.05 and ((m["tofamp.exr"] > 0) == ok).all()
     np.testing.assert_allclose(m["disp_tof.exr"][ok], f * B / m["tof.exr"][ok], rtol=1e-4)
+    # LiDAR/stereo variant: LiDAR disparity in the left view is f*B/Z of the LiDAR depth there
+    ok = m["lidar.exr"] > 0
+    assert ok.any() and ((m["disp_lidar.exr"] > 0) == ok).all()
+    np.testing.assert_allclose(m["disp_lidar.exr"][ok], f * B / m["lidar.exr"][ok], rtol=1e-4)
 
 
 def test_meta_has_spec_cameras_and_timings_stay_out_of_it(produced):

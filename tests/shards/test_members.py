@@ -37,7 +37,7 @@ def value_for(kind, rng: np.random.Generator):
 
 def test_registry_names_are_keyable_and_filenames_resolve_back():
     assert list(MEMBERS) == ["rgb", "mask", "mask_thesis", "depth", "tof", "tofraw", "lidar", "right", "disp_sgm",
-                             "disp_gt", "disp_tof", "tofamp", "crackmap", "json"]
+                             "disp_gt", "disp_tof", "tofamp", "disp_lidar", "crackmap", "json"]
     for name, kind in MEMBERS.items():
         assert kind.name == name and "." not in name
         assert member_for_file(kind.filename) is kind

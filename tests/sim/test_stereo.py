@@ -105,3 +105,15 @@ def test_bad_stereo_inputs_raise(scene):
     st = simulate_stereo(StereoSpec(True, 0.08, 32, 5), rig, left, right, gt, None)
     with pytest.raises(SensorError, match="needs the ToF"):
         st.synth3()
+    with pytest.raises(SensorError, match="lidar_depth_rgb"):
+        simulate_stereo(StereoSpec(True, 0.08, 32, 5), rig, left, right, gt, None, gt[:-1])
+
+
+def test_lidar_disparity_is_f_b_over_z_of_the_lidar_depth(scene):
+    _, rig, _, left, right, gt = scene
+    lidar = np.full_like(gt, -1.0)
+    lidar[::7] = gt[::7]  # scan lines
+    st = simulate_stereo(StereoSpec(True, 0.08, 32, 5), rig, left, right, gt, None, lidar)
+    ok = lidar > 0
+    np.testing.assert_allclose(st.disp_lidar[ok], rig.rgb.fx * 0.08 / lidar[ok], rtol=1e-5)
+    assert np.all(st.disp_lidar[~ok] == -1)

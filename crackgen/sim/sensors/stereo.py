@@ -5,7 +5,10 @@ All maps live in the left (= RGB) view, in pixels, float32, -1 = no value:
 stereo disparity (SGBM), ToF disparity (ToF points z-buffered into the left
 view, d = f*B/Z), left-minus-warped-right grey difference (warped by the
 stereo disparity, 0 where it is invalid), ToF amplitude in the left view
-(-1 none) and GT disparity from the ray-cast GT depth.
+(-1 none), GT disparity from the ray-cast GT depth and, with a LiDAR, its
+sparse disparity in the left view (the 3-channel LiDAR/stereo variant, Ch. 4.6;
+its interpolated form is recomputed by ``fusion.densify`` on read, so a dense
+map is not stored for every sample).
 """
 from __future__ import annotations
 
@@ -31,6 +34,7 @@ class StereoResult:
     disp_tof: np.ndarray | None  # (H,W) ToF disparity in the left view, -1 none
     lr_diff: np.ndarray  # (H,W) left grey - right grey warped by disp_sgm
     tof_amplitude: np.ndarray | None  # (H,W) ToF amplitude in the left view, -1 none
+    disp_lidar: np.ndarray | None = None  # (H,W) LiDAR disparity f*B/Z in the left view, -1 none
 
     def synth3(self) -> np.ndarray:
         """(H,W,4) float32 network input in ``SYNTH3_CHANNELS`` order (needs the ToF)."""
@@ -53,12 +57,14 @@ def simulate_stereo(
     right_rgb: np.ndarray,
     gt_depth: np.ndarray,
     tof: TofResult | None = None,
+    lidar_depth_rgb: np.ndarray | None = None,
 ) -> StereoResult:
     """Stereo maps of one sample from the rendered pair and the GT depth of the left view."""
     baseline = rig_baseline(rig)
     f = rig.rgb.fx
     shape = (rig.rgb.height, rig.rgb.width)
-    for name, img in (("left_rgb", left_rgb), ("right_rgb", right_rgb), ("gt_depth", gt_depth)):
+    for name, img in (("left_rgb", left_rgb), ("right_rgb", right_rgb), ("gt_depth", gt_depth),
+                      ("lidar_depth_rgb", gt_depth if lidar_depth_rgb is None else lidar_depth_rgb)):
         if np.asarray(img).shape[:2] != shape:
             raise SensorError(f"stereo: {name} is {np.asarray(img).shape[:2]}, the RGB camera is {shape}")
     disp_sgm = sgbm_disparity(left_rgb, right_rgb, spec.num_disparities, spec.block_size)
@@ -75,4 +81,6 @@ def simulate_stereo(
         disp_tof=disp_tof,
         lr_diff=left_right_difference(left_rgb, right_rgb, disp_sgm),
         tof_amplitude=amp,
+        # the LiDAR depth is already z-buffered in the left (= RGB) view, so d = f*B/Z per pixel
+        disp_lidar=None if lidar_depth_rgb is None else depth_to_disparity(lidar_depth_rgb, f, baseline),
     )

@@ -1,0 +1,83 @@
+"""Network inputs of the confidence CNN, built the same way for shards, files and real scenes.
+
+Two variants (thesis Ch. 3.3 / 4.6, Agresti et al. 2019), channels in order:
+
+* ``tof`` (4): stereo disparity, ToF disparity in the left view, left grey
+  minus right grey warped by the stereo disparity, ToF amplitude;
+* ``lidar`` (3): stereo disparity, LiDAR disparity, left grey minus right grey
+  warped by the LiDAR disparity.
+
+The candidate maps (channels 0 and 1) are made dense first: stereo holes and
+the sparse ToF/LiDAR by ``fusion.densify`` (normalised convolution by default),
+unless the caller passes maps that are already dense (an external stereo
+network, a depth-completion network). The two candidates are what the fusion
+rules pick from, so the CNN scores exactly the values that get fused.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fusion.densify import fill_nearest, interpolate_sparse, valid_values
+from fusion.stereo import left_right_difference
+
+VARIANTS = {"tof": ("disp_stereo", "disp_tof", "lr_diff", "tof_amplitude"),
+            "lidar": ("disp_stereo", "disp_lidar", "lr_diff_lidar")}
+OTHER_NAME = {"tof": "ToF", "lidar": "LiDAR"}
+
+
+class FusionInputError(ValueError):
+    """Missing or mis-sized maps for a fusion input variant."""
+
+
+@dataclass
+class FusionInputs:
+    """One scene's CNN input (H,W,C) float32 and its two dense candidate disparities."""
+
+    variant: str
+    x: np.ndarray  # (H,W,C) raw (unnormalised) channels in VARIANTS[variant] order
+
+    @property
+    def stereo(self) -> np.ndarray:
+        return self.x[..., 0]
+
+    @property
+    def other(self) -> np.ndarray:
+        return self.x[..., 1]
+
+
+def _shape_check(shape: tuple[int, int], **maps: np.ndarray | None) -> None:
+    for name, m in maps.items():
+        if m is not None and np.asarray(m).shape[:2] != shape:
+            raise FusionInputError(f"{name} is {np.asarray(m).shape[:2]}, stereo disparity is {shape}")
+
+
+def build_inputs(
+    variant: str,
+    disp_stereo: np.ndarray,
+    disp_other: np.ndarray,
+    left: np.ndarray,
+    right: np.ndarray,
+    amplitude: np.ndarray | None = None,
+    densify: str = "normconv",
+) -> FusionInputs:
+    """Input stack of ``variant`` from sparse or dense maps (all in the left view, -1 = none)."""
+    if variant not in VARIANTS:
+        raise FusionInputError(f"unknown fusion variant {variant!r}; choose from {', '.join(VARIANTS)}")
+    shape = np.asarray(disp_stereo).shape
+    _shape_check(shape, disp_other=disp_other, left=left, right=right, amplitude=amplitude)
+    if not valid_values(disp_other).any():
+        raise FusionInputError(f"the {OTHER_NAME[variant]} disparity has no valid pixel")
+    ds = interpolate_sparse(disp_stereo, densify) if valid_values(disp_stereo).any() else np.full(shape, -1, np.float32)
+    do = interpolate_sparse(disp_other, densify)
+    if variant == "tof":
+        if amplitude is None:
+            raise FusionInputError("the tof variant needs the ToF amplitude")
+        amp = fill_nearest(amplitude)
+        lr = left_right_difference(left, right, ds)
+        x = np.stack([ds, do, lr, np.maximum(amp, 0.0)], axis=-1)
+    else:
+        lr = left_right_difference(left, right, do)
+        x = np.stack([ds, do, lr], axis=-1)
+    return FusionInputs(variant, x.astype(np.float32))

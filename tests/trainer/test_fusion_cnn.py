@@ -1,0 +1,170 @@
+"""Confidence CNN, patch sampler and a short `cracktrain fusion` run on tiny synthetic fusion shards.
+
+The shards hold the members the generator writes with stereo + ToF + LiDAR on
+(rgb, right, disp_sgm, disp_tof, tofamp, disp_lidar, disp_gt), made without
+Blender: a slanted plane, stereo that is noisy where the image has no texture,
+ToF that is noisy where its amplitude is low, so confidence is learnable.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from crackgen.shards import ShardWriter, sample_key
+from trainer.cli import build_parser
+from trainer.cli import main as cli_main
+from trainer.confidence_cnn import ConfidenceCNN
+from trainer.errors import TrainerInputError
+from trainer.fusion_data import FusionScene, load_shard_scenes, random_patch
+from trainer.fusion_train import make_batch, masked_mse
+
+H, W = 40, 56
+
+
+def fusion_sample(rng: np.random.Generator) -> dict:
+    yy, xx = np.mgrid[:H, :W]
+    gt = (8.0 + 0.02 * xx + 0.01 * yy).astype(np.float32)
+    tex = rng.integers(0, 255, (H, W), dtype=np.uint8)
+    tex[:, W // 2:] = 128  # no texture on the right half: stereo fails there
+    left = np.repeat(tex[..., None], 3, axis=2)
+    right = np.roll(left, -8, axis=1)
+    stereo = gt + rng.normal(0, 0.05, gt.shape).astype(np.float32)
+    stereo[:, W // 2:] += rng.normal(0, 2.0, (H, W - W // 2)).astype(np.float32)
+    amp = np.where(yy < H // 2, 0.8, 0.05).astype(np.float32)  # dark lower half: noisy ToF
+    tof = gt + rng.normal(0, 1, gt.shape).astype(np.float32) * np.where(yy < H // 2, 0.05, 2.0).astype(np.float32)
+    sparse = np.zeros((H, W), bool)
+    sparse[::2, ::2] = True
+    lidar = np.where(yy % 8 == 0, gt, -1.0).astype(np.float32)
+    return {"rgb.png": left, "right.png": right, "disp_gt.exr": gt, "disp_sgm.exr": np.maximum(stereo, 0.5),
+            "disp_tof.exr": np.where(sparse, np.maximum(tof, 0.5), -1.0).astype(np.float32),
+            "tofamp.exr": np.where(sparse, amp, -1.0).astype(np.float32), "disp_lidar.exr": lidar,
+            "json": {"synthetic": True}}
+
+
+@pytest.fixture(scope="module")
+def fusion_shards(tmp_path_factory):
+    root = tmp_path_factory.mktemp("fusion_shards")
+    rng = np.random.default_rng(3)
+    for s in range(2):
+        with ShardWriter(root, s) as w:
+            for i in range(3):
+                w.add(sample_key(s, i), fusion_sample(rng))
+    return root
+
+
+@pytest.mark.parametrize("channels,size", [(4, (37, 53)), (3, (16, 16))])
+def test_cnn_output_has_the_input_size_and_two_channels(channels, size):
+    model = ConfidenceCNN(channels)
+    out = model(torch.randn(2, channels, *size))
+    assert out.shape == (2, 2, *size)
+    assert [m.kernel_size for m in model.modules() if isinstance(m, torch.nn.Conv2d)] == [(5, 5)] + [(3, 3)] * 5
+    assert all(m.padding_mode == "replicate" for m in model.modules() if isinstance(m, torch.nn.Conv2d))
+    prelu = [m for m in model.modules() if isinstance(m, torch.nn.PReLU)]
+    assert len(prelu) == 5 and all(torch.allclose(m.weight, torch.tensor(0.02)) for m in prelu)
+    with pytest.raises(TrainerInputError):
+        ConfidenceCNN(5)
+
+
+def test_random_patch_without_augmentation_is_a_crop_and_is_seeded():
+    x = np.arange(30 * 40 * 2, dtype=np.float32).reshape(30, 40, 2)
+    scene = FusionScene("k", x, x[..., 0].copy())
+    p, g = random_patch(scene, 16, np.random.default_rng(0), rotate_deg=0.0, flips=False)
+    r0, c0 = np.argwhere(x[..., 0] == p[0, 0, 0])[0]
+    np.testing.assert_array_equal(p, x[r0:r0 + 16, c0:c0 + 16])
+    np.testing.assert_array_equal(g, p[..., 0])
+    a = random_patch(scene, 16, np.random.default_rng(5))
+    b = random_patch(scene, 16, np.random.default_rng(5))
+    np.testing.assert_array_equal(a[0], b[0])
+    # rotated near a border: GT is never invented (-1 outside), inputs replicate
+    rot = random_patch(FusionScene("k", x, np.full((30, 40), 5.0, np.float32)), 30, np.random.default_rng(1), 5.0)
+    assert set(np.unique(rot[1])) <= {-1.0, 5.0}
+
+
+def test_masked_mse_ignores_pixels_without_gt():
+    pred = torch.tensor([[1.0, 2.0, 3.0]])
+    target = torch.tensor([[1.0, float("nan"), 1.0]])
+    assert masked_mse(pred, target).item() == pytest.approx(2.0)
+
+
+def test_missing_members_are_a_one_line_error(tmp_path):
+    rng = np.random.default_rng(0)
+    with ShardWriter(tmp_path, 0) as w:
+        smp = fusion_sample(rng)
+        del smp["disp_tof.exr"]
+        w.add(sample_key(0, 0), smp)
+    with pytest.raises(TrainerInputError, match="disp_tof"):
+        load_shard_scenes(tmp_path, "tof", progress=False)
+
+
+def _args(parser_args: list[str]) -> argparse.Namespace:
+    return build_parser().parse_args(parser_args)
+
+
+def test_a_few_training_steps_reduce_the_loss_then_eval_and_fuse(fusion_shards, tmp_path, capsys):
+    torch.set_num_threads(1)
+    out = tmp_path / "run"
+    common = ["--data", str(fusion_shards), "--val-fraction", "0.34", "--patch", "24", "-b", "4",
+              "--optimizer", "adam", "--lr", "0.003", "--no-progress", "--out", str(out)]
+    args = _args(["fusion", *common, "--steps", "12"])
+    scenes = load_shard_scenes(fusion_shards, "tof", progress=False)
+    from trainer.fusion_data import channel_stats
+
+    mean, std = channel_stats(scenes)
+    x, t = make_batch(scenes, args, 10_000, mean, std)  # a fixed batch no training step draws
+    torch.manual_seed(args.seed)
+    before = masked_mse(ConfidenceCNN(4)(x), t).item()
+    assert cli_main(["fusion", *common, "--steps", "12"]) == 0
+    ckpt = torch.load(out / "last.pt", weights_only=False)
+    model = ConfidenceCNN(4)
+    model.load_state_dict(ckpt["model"])
+    x, t = make_batch(scenes, args, 10_000, ckpt["sample_config"]["mean"], ckpt["sample_config"]["std"])
+    with torch.no_grad():
+        after = masked_mse(model(x), t).item()
+    assert after < 0.5 * before
+    assert len(ckpt["val_keys"]) == 2 and not set(ckpt["val_keys"]) & set(ckpt["train_keys"])
+    assert "trained 12 steps" in capsys.readouterr().out
+
+    assert cli_main(["fusion-eval", "--ckpt", str(out / "last.pt"), "--no-progress", "--out", str(tmp_path / "ev")]) == 0
+    table = capsys.readouterr().out
+    for row in ("| stereo |", "| ToF |", "| fused, max |", "| fused, weighted |", "| fused, max + BM3D after |"):
+        assert row in table
+    assert (tmp_path / "ev" / "metrics.json").is_file()
+
+    smp = fusion_sample(np.random.default_rng(9))
+    files = {}
+    for name, member in (("stereo", "disp_sgm.exr"), ("other", "disp_tof.exr"), ("amplitude", "tofamp.exr"),
+                         ("gt", "disp_gt.exr")):
+        files[name] = tmp_path / f"{name}.npy"
+        np.save(files[name], smp[member])
+    import cv2
+
+    for name, member in (("left", "rgb.png"), ("right", "right.png")):
+        files[name] = tmp_path / f"{name}.png"
+        cv2.imwrite(str(files[name]), smp[member])
+    argv = ["fuse", "--ckpt", str(out / "last.pt"), "--out", str(tmp_path / "fused")]
+    argv += [a for k, p in files.items() for a in (f"--{k}", str(p))]
+    assert cli_main(argv) == 0
+    assert (tmp_path / "fused" / "fused_max.exr").is_file() and "| fused_max |" in capsys.readouterr().out
+    assert cli_main([str(tmp_path / "nope.npy") if a == str(files["gt"]) else a for a in argv]) == 2
+    assert "nope.npy" in capsys.readouterr().err
+
+
+REAL_CONES = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real" / "stereo" / "middlebury2003_cones"
+
+
+@pytest.mark.skipif(not REAL_CONES.is_dir(), reason="../shared/data/real is absent")
+def test_real_stereo_scene_has_lidar_inputs_and_gt():
+    from trainer.fusion_real import real_scene
+
+    args = argparse.Namespace(lidar_lines=16, lidar_sigma_px=0.25, lidar_dropout=0.1, seed=0)
+    s = real_scene(REAL_CONES, args, "normconv")
+    assert s.x.shape == (375, 450, 3) and s.gt.shape == (375, 450)
+    assert (s.x[..., 0] > 0).all() and (s.x[..., 1] > 0).all()  # both candidates dense
+    ok = s.gt > 0
+    assert np.median(np.abs(s.x[..., 1] - s.gt)[ok]) < 1.0  # interpolated scan lines follow the GT
+    with pytest.raises(TrainerInputError, match="neither"):
+        real_scene(REAL_CONES.parent, args, "normconv")

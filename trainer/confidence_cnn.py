@@ -1,0 +1,40 @@
+"""The confidence CNN of the ToF/LiDAR-stereo fusion (thesis Fig. 3.8 / 4.33, Agresti et al. 2019).
+
+Six convolutions (5x5 -> 64, 3x3 -> 128 three times, 3x3 -> 256, 3x3 -> 2)
+with PReLU (initial slope 0.02) between them and border-replicate padding, so
+the two output maps (confidence of stereo, confidence of ToF/LiDAR) have the
+input's size. No pooling and no striding: a per-pixel score from a 15x15
+receptive field. The output is left unbounded, as in the thesis (the MSE
+targets exp(-|D - D_GT|) lie in (0, 1]).
+"""
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from trainer.errors import TrainerInputError
+
+LAYERS = ((5, 64), (3, 128), (3, 128), (3, 128), (3, 256), (3, 2))  # (kernel, output channels)
+PRELU_INIT = 0.02
+IN_CHANNELS = {"tof": 4, "lidar": 3}
+
+
+class ConfidenceCNN(nn.Module):
+    """[B,C,H,W] normalised inputs -> [B,2,H,W] confidences (stereo, other sensor)."""
+
+    def __init__(self, in_channels: int = 4) -> None:
+        super().__init__()
+        if in_channels not in (3, 4):
+            raise TrainerInputError(f"the confidence CNN takes 3 (LiDAR) or 4 (ToF) input channels, got {in_channels}")
+        self.in_channels = in_channels
+        layers: list[nn.Module] = []
+        cin = in_channels
+        for i, (k, cout) in enumerate(LAYERS):
+            layers.append(nn.Conv2d(cin, cout, k, padding=k // 2, padding_mode="replicate"))
+            if i < len(LAYERS) - 1:
+                layers.append(nn.PReLU(cout, init=PRELU_INIT))
+            cin = cout
+        self.net = nn.Sequential(*layers)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x)

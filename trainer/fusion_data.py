@@ -1,0 +1,150 @@
+"""Scenes for the confidence CNN: from shards or from files, plus the random-patch sampler.
+
+A ``FusionScene`` holds the raw (unnormalised) input stack of one scene (see
+``fusion.fusion_inputs``) and, when known, its GT disparity. Scenes come from
+
+* shards written by ``crackgen generate`` with stereo + ToF (+ LiDAR) on:
+  members ``rgb``, ``right``, ``disp_sgm``, ``disp_tof``/``tofamp`` or
+  ``disp_lidar``, ``disp_gt``;
+* plain files (``cracktrain fuse``): the plug-in point for stronger inputs, e.g.
+  a LEAStereo disparity or a PENet-completed LiDAR map, used as they are.
+
+``--stereo-dir`` / ``--other-dir`` swap a shard's stereo or ToF/LiDAR
+disparity for ``DIR/KEY.{exr,pfm,npy,tif,png}`` so an external network's output
+can be fused and evaluated against the same GT.
+
+Training patches (thesis: 128 px, flips, +-5 deg rotation) are cut by
+``random_patch`` with an explicit numpy Generator: inputs are resampled
+bilinearly with replicated borders, the GT with nearest neighbour and -1
+outside, so no GT value is invented.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+from fusion.fusion_inputs import VARIANTS, FusionInputError, build_inputs
+from trainer.errors import TrainerInputError
+from trainer.imageio import DEPTH_EXTS, read_float_map
+
+log = logging.getLogger(__name__)
+
+OTHER_MEMBERS = {"tof": ("disp_tof", "tofamp"), "lidar": ("disp_lidar",)}
+
+
+@dataclass
+class FusionScene:
+    key: str
+    x: np.ndarray  # (H,W,C) float32 raw input channels, VARIANTS order
+    gt: np.ndarray | None  # (H,W) float32 GT disparity, -1 none
+
+
+def _external(folder: str | Path | None, key: str) -> np.ndarray | None:
+    if folder is None:
+        return None
+    for ext in DEPTH_EXTS:
+        p = Path(folder) / f"{key}{ext}"
+        if p.is_file():
+            return read_float_map(p)
+    raise TrainerInputError(f"{folder}: no disparity file for sample {key} ({'/'.join(DEPTH_EXTS)})")
+
+
+def scene_from_sample(sample: dict, variant: str, densify: str = "normconv", stereo_dir: str | Path | None = None,
+                      other_dir: str | Path | None = None) -> FusionScene:
+    """One shard sample -> FusionScene; a missing member is a one-line error naming it."""
+    key = sample["__key__"]
+    need = ("rgb", "right", "disp_sgm", "disp_gt") + OTHER_MEMBERS[variant]
+    missing = [m for m in need if m not in sample]
+    if missing:
+        raise TrainerInputError(f"sample {key} has no {', '.join(missing)} member(s): the {variant} variant needs a "
+                                f"recipe with stereo and {'ToF' if variant == 'tof' else 'LiDAR'} on (recipes/stereo_tof.toml)")
+    ext_stereo, ext_other = _external(stereo_dir, key), _external(other_dir, key)
+    stereo = sample["disp_sgm"] if ext_stereo is None else ext_stereo
+    other = sample[OTHER_MEMBERS[variant][0]] if ext_other is None else ext_other
+    try:
+        inp = build_inputs(variant, stereo, other, sample["rgb"], sample["right"],
+                           sample.get("tofamp"), densify)
+    except FusionInputError as exc:
+        raise TrainerInputError(f"sample {key}: {exc}") from None
+    return FusionScene(key, inp.x, np.asarray(sample["disp_gt"], np.float32))
+
+
+def load_shard_scenes(path: str | Path, variant: str, keys: Sequence[str] | None = None, densify: str = "normconv",
+                      stereo_dir: str | Path | None = None, other_dir: str | Path | None = None,
+                      progress: bool = True) -> list[FusionScene]:
+    """All (or ``keys``) samples of a dataset as scenes, in key order."""
+    from tqdm import tqdm
+
+    from crackgen.shards import iter_samples, list_shards
+
+    if variant not in VARIANTS:
+        raise TrainerInputError(f"unknown --variant {variant!r}; choose from {', '.join(VARIANTS)}")
+    if not Path(path).exists():
+        raise TrainerInputError(f"--data {path} does not exist")
+    members = {"rgb", "right", "disp_sgm", "disp_gt", *OTHER_MEMBERS[variant]}
+    try:
+        if not list_shards(path):
+            raise TrainerInputError(f"--data {path} holds no shards")
+        scenes = [scene_from_sample(s, variant, densify, stereo_dir, other_dir)
+                  for s in tqdm(iter_samples(path, keys=keys, members=members), desc="fusion inputs",
+                                unit="scene", disable=not progress, total=len(keys) if keys is not None else None)]
+    except TrainerInputError:
+        raise
+    except Exception as exc:  # ShardError, CodecError, ManifestError: name the dataset
+        raise TrainerInputError(f"--data {path}: {type(exc).__name__}: {exc}") from None
+    if not scenes:
+        raise TrainerInputError(f"--data {path}: no samples{' with the requested keys' if keys else ''}")
+    return sorted(scenes, key=lambda s: s.key)
+
+
+def shard_keys(path: str | Path) -> list[str]:
+    """Sample keys of a dataset, read from the tar headers only."""
+    from crackgen.shards import iter_samples
+
+    try:
+        return sorted(s["__key__"] for s in iter_samples(path, members=set()))
+    except Exception as exc:
+        raise TrainerInputError(f"--data {path}: {type(exc).__name__}: {exc}") from None
+
+
+# ------------------------------------------------------------------ normalisation and patches
+
+def channel_stats(scenes: Sequence[FusionScene]) -> tuple[list[float], list[float]]:
+    """Per-channel mean and std over all pixels of ``scenes``, stored in the checkpoint so that
+    training, evaluation and ``fuse`` normalise identically."""
+    x = np.concatenate([s.x.reshape(-1, s.x.shape[-1]) for s in scenes]).astype(np.float64)
+    std = x.std(0)
+    return x.mean(0).tolist(), np.where(std > 1e-6, std, 1.0).tolist()
+
+
+def normalise(x: np.ndarray, mean: Sequence[float], std: Sequence[float]) -> np.ndarray:
+    """(…,C) raw channels -> (x - mean) / std, float32."""
+    return ((x - np.asarray(mean, np.float32)) / np.asarray(std, np.float32)).astype(np.float32)
+
+
+def random_patch(scene: FusionScene, size: int, rng: np.random.Generator, rotate_deg: float = 5.0,
+                 flips: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """A ``size`` x ``size`` patch (x (s,s,C), gt (s,s)) at a random place, rotated by U(-r, r)
+    degrees about its centre and flipped left-right / up-down with probability 1/2 each."""
+    h, w = scene.x.shape[:2]
+    x0 = int(rng.integers(0, max(w - size, 0) + 1))  # integer corner: without rotation the patch is an exact crop
+    y0 = int(rng.integers(0, max(h - size, 0) + 1))
+    angle = rng.uniform(-rotate_deg, rotate_deg) if rotate_deg > 0 else 0.0
+    half = (size - 1) / 2
+    m = cv2.getRotationMatrix2D((x0 + half, y0 + half), angle, 1.0)
+    m[:, 2] -= (x0, y0)  # the patch centre lands on the output centre
+    x = cv2.warpAffine(scene.x, m, (size, size), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    if x.ndim == 2:
+        x = x[..., None]
+    gt = cv2.warpAffine(scene.gt, m, (size, size), flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                        borderValue=-1.0)
+    if flips and rng.random() < 0.5:
+        x, gt = x[:, ::-1], gt[:, ::-1]
+    if flips and rng.random() < 0.5:
+        x, gt = x[::-1], gt[::-1]
+    return np.ascontiguousarray(x), np.ascontiguousarray(gt)
