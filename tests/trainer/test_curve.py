@@ -87,13 +87,19 @@ def test_train_or_reuse_keeps_finished_and_resumes_interrupted(tmp_path, monkeyp
         (tmp_path / name).mkdir(exist_ok=True)
         return argparse.Namespace(out=str(tmp_path / name), max_steps=100, init=init, precise_bn=None, resume=None)
 
-    def ckpt(name, step, **extra):
-        torch.save({"model": {}, "args": {}, "sample_config": {}, "step": step, **extra}, tmp_path / name / "checkpoint.pt")
+    def ckpt(name, step, init=None, precise_bn=None, **extra):
+        torch.save({"model": {}, "args": {"init": init, "precise_bn": precise_bn}, "sample_config": {}, "step": step,
+                    **extra}, tmp_path / name / "checkpoint.pt")
 
     assert s2r.train_or_reuse(ns("fresh"))["seconds"] == 1.0 and calls == [None]  # nothing there: trains
     n = ns("done", init="pre.pt")
-    ckpt("done", 100, finished=True)
+    ckpt("done", 100, init="pre.pt", finished=True)
     assert s2r.train_or_reuse(n)["seconds"] == 0.0 and len(calls) == 1  # finished: kept
+    n = ns("done_no_bn")
+    n.precise_bn = 50
+    ckpt("done_no_bn", 100, finished=True)  # finished without the precise BN now asked for: resumed to add it
+    s2r.train_or_reuse(n)
+    assert calls[-1] == str(tmp_path / "done_no_bn" / "checkpoint.pt")
     n = ns("killed", init="pre.pt")
     ckpt("killed", 40)
     s2r.train_or_reuse(n)
