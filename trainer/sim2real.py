@@ -293,8 +293,8 @@ def train_or_reuse(ns: argparse.Namespace) -> dict[str, Any]:
         if (ckpt.get("finished") and same_bn) or legacy_final:
             log.info("kept the finished training in %s (%d steps)", ns.out, ckpt["step"])
             return {"step": ckpt["step"], "seconds": 0.0, "out": ns.out}
-        log.info("resuming the training in %s at step %d%s", ns.out, ckpt["step"],
-                 "" if same_bn else " (to redo its precise BN)")
+        why = "interrupted" if ckpt["step"] < (ns.max_steps or 0) else "its precise BN differs"
+        log.info("resuming the training in %s at step %d (%s)", ns.out, ckpt["step"], why)
         ns.resume = str(path)
     return train_seg(ns)
 
@@ -302,7 +302,8 @@ def train_or_reuse(ns: argparse.Namespace) -> dict[str, Any]:
 def curve_precise_bn(args: argparse.Namespace) -> int:
     """Both arms end with precise BN (default 50 batches). After 120 steps from ImageNet weights the
     running statistics still lag the weights: N=120 real-only scored F1 0.06 without it, 0.69 with it."""
-    return 50 if args.precise_bn is None else args.precise_bn
+    given = getattr(args, "precise_bn", None)
+    return 50 if given is None else given
 
 
 def small_set_repeat(n: int, args: argparse.Namespace) -> int:
