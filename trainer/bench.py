@@ -55,6 +55,25 @@ def bench_loader(ds: SegStream, workers: int, samples: int) -> dict[str, float]:
             "samples_per_s_per_worker": round(n / dt / max(1, workers), 2), "first_sample_s": round(first or 0.0, 3)}
 
 
+def time_steps(model: torch.nn.Module, opt: torch.optim.Optimizer, loss_of, x: torch.Tensor, steps: int,
+               device: torch.device) -> list[float]:
+    """Seconds of each of ``steps`` training steps after one warm-up step (CUDA synchronised)."""
+    times = []
+    for i in range(steps + 1):
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        t0 = time.perf_counter()
+        loss = loss_of(model(x))
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        if i > 0:
+            times.append(time.perf_counter() - t0)
+    return times
+
+
 def bench_model(arch: str, in_channels: int, size: int, batch: int, steps: int, device: torch.device) -> dict[str, Any]:
     torch.manual_seed(0)
     model = build_model(arch, in_channels).to(device).train()
@@ -62,19 +81,7 @@ def bench_model(arch: str, in_channels: int, size: int, batch: int, steps: int, 
     loss_fn = make_loss("bce")
     x = torch.randn(batch, in_channels, size, size, device=device)
     y = (torch.rand(batch, 1, size, size, device=device) > 0.9).float()
-    times = []
-    for i in range(steps + 1):
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        t0 = time.perf_counter()
-        loss = loss_fn(model(x), y)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        if i > 0:  # first step is warm-up
-            times.append(time.perf_counter() - t0)
+    times = time_steps(model, opt, lambda out: loss_fn(out, y), x, steps, device)
     return {"arch": arch, "in_channels": in_channels, "size": size, "batch": batch, "device": str(device),
             "threads": torch.get_num_threads(), "step_s_mean": round(sum(times) / len(times), 4),
             "step_s_min": round(min(times), 4), "params_M": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
@@ -90,19 +97,7 @@ def bench_fusion_model(variant: str, size: int, batch: int, steps: int, device: 
     opt = torch.optim.Adadelta(model.parameters(), lr=0.01)
     x = torch.randn(batch, IN_CHANNELS[variant], size, size, device=device)
     y = torch.rand(batch, 2, size, size, device=device)
-    times = []
-    for i in range(steps + 1):
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        t0 = time.perf_counter()
-        loss = masked_mse(model(x), y)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        if i > 0:  # first step is warm-up
-            times.append(time.perf_counter() - t0)
+    times = time_steps(model, opt, lambda out: masked_mse(out, y), x, steps, device)
     return {"arch": f"confidence_cnn_{variant}", "in_channels": IN_CHANNELS[variant], "size": size, "batch": batch,
             "device": str(device), "threads": torch.get_num_threads(), "step_s_mean": round(sum(times) / len(times), 4),
             "step_s_min": round(min(times), 4), "params_M": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}

@@ -29,6 +29,7 @@ import bpy
 import numpy as np
 import OpenEXR
 
+from crackgen.config.spec import RenderKnobs
 from crackgen.errors import CrackgenError
 
 log = logging.getLogger(__name__)
@@ -40,8 +41,8 @@ class RenderError(CrackgenError, RuntimeError):
     """A render that did not produce the expected output (names the file/pass)."""
 
 
-@dataclass
-class RenderSettings:
+@dataclass(kw_only=True)
+class RenderSettings(RenderKnobs):
     samples: int = 16
     denoise: bool = True
     threads: int = 0  # 0 = Cycles decides (AUTO)
@@ -49,25 +50,6 @@ class RenderSettings:
     max_bounces: int = 4
     seed: int = 0
     filter_width_px: float = 1.5  # Blackman-Harris pixel filter width (Blender default)
-    # issue 12 knobs, named as in [render]; defaults = Blender 4.5 factory values (= renders before them)
-    adaptive_sampling: bool = True
-    adaptive_threshold: float = 0.01
-    adaptive_min_samples: int = 0
-    denoise_prefilter: str = "accurate"
-    denoise_passes: str = "rgb_albedo_normal"
-    denoise_quality: str = "high"
-    diffuse_bounces: int = 4
-    glossy_bounces: int = 4
-    transmission_bounces: int = 12
-    transparent_bounces: int = 8
-    caustics_reflective: bool = True
-    caustics_refractive: bool = True
-    light_tree: bool = True
-    fast_gi: bool = False
-    ao_bounces: int = 1
-    clamp_direct: float = 0.0
-    clamp_indirect: float = 10.0
-    persistent_data: bool = False
 
     @classmethod
     def from_spec(cls, r: Any, filter_width_px: float, **override: Any) -> "RenderSettings":

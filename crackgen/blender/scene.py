@@ -69,7 +69,8 @@ class LiveScene:
         self.persistent_data = bool(persistent_data)  # images then swap between two datablocks
         configure_scene(self.scene, width, height, self.persistent_data)
         self.device = select_device(self.scene, device)
-        self.defaults = RenderSettings(samples, denoise, threads, device, max_bounces, 0, filter_width_px,
+        self.defaults = RenderSettings(samples=samples, denoise=denoise, threads=threads, device=device,
+                                       max_bounces=max_bounces, seed=0, filter_width_px=filter_width_px,
                                        persistent_data=self.persistent_data)
         self.filter_width_px = float(filter_width_px)  # Cycles pixel filter; public, applied at the next update()
         self.surface = LiveSurface(self.scene, grid_px, texture_px, swap_images=self.persistent_data)

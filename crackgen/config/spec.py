@@ -172,14 +172,10 @@ class CameraSpec:
 
 
 @dataclass
-class RenderSpec:
-    samples: int
-    denoise: bool
-    threads: int  # 0 = let Cycles decide
-    device: str  # cpu | gpu
-    seed: int  # Cycles seed
-    max_bounces: int
-    # issue 12 speed/quality knobs; defaults = Blender 4.5 factory values (older sample JSON lacks them)
+class RenderKnobs:
+    """Cycles speed/quality knobs, named as in [render]; defaults = Blender 4.5 factory values (the
+    renders before they existed; older sample JSON lacks them). The renderer's settings reuse this."""
+
     adaptive_sampling: bool = True
     adaptive_threshold: float = 0.01
     adaptive_min_samples: int = 0
@@ -200,8 +196,17 @@ class RenderSpec:
     persistent_data: bool = False
 
 
-_RENDER_FIELDS = [f.name for f in dataclasses.fields(RenderSpec)]
-RENDER_KNOBS = tuple(_RENDER_FIELDS[_RENDER_FIELDS.index("max_bounces") + 1:])  # copied 1:1 from [render]
+@dataclass(kw_only=True)
+class RenderSpec(RenderKnobs):
+    samples: int
+    denoise: bool
+    threads: int  # 0 = let Cycles decide
+    device: str  # cpu | gpu
+    seed: int  # Cycles seed
+    max_bounces: int
+
+
+RENDER_KNOBS = tuple(f.name for f in dataclasses.fields(RenderKnobs))  # copied 1:1 from [render]
 
 
 @dataclass
