@@ -31,6 +31,7 @@ import numpy as np
 import crackgen
 from crackgen.config.recipe import Recipe
 from crackgen.config.spec import SampleSpec, make_spec, pixel_footprint_m
+from crackgen.datagen.heap import release_free_heap
 from crackgen.errors import CrackgenError
 from crackgen.postrender.stage import adapt_members, camera_effects_members
 from crackgen.postrender.targets import TargetPhotos
@@ -151,6 +152,7 @@ class SampleProducer:
         attempt = 0
         while True:
             sample = self._make(index, attempt, tm)
+            release_free_heap()  # this try's temporaries are gone: keep the worker's RSS flat
             if sample is not None:
                 return sample
             attempt += 1
