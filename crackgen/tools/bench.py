@@ -14,6 +14,8 @@ import tempfile
 import time
 from typing import Any
 
+import numpy as np
+
 from crackgen.config.recipe import Recipe
 
 # table rows: (label, stage keys summed)
@@ -50,6 +52,7 @@ def bench(recipe: Recipe, samples: int = 5, threads: int = 0, progress: bool = T
     rss_start = proc.memory_info().rss / 2**20  # after the warm-up: scene built, caches filled
     per: list[dict[str, float]] = []
     sizes: list[int] = []
+    rss_trace: list[float] = []  # after each sample: a slow leak shows as a trend, not only as end - start
     with tempfile.TemporaryDirectory(prefix="crackgen_bench_") as tmp, ShardWriter(tmp, 0) as writer:
         for i in tqdm(range(1, samples + 1), desc="bench", unit="sample", disable=not progress):
             t_start = time.perf_counter()
@@ -66,6 +69,7 @@ def bench(recipe: Recipe, samples: int = 5, threads: int = 0, progress: bool = T
             t["write"] = max(0.0, time.perf_counter() - t2 - t["encode"])
             t["total"] = time.perf_counter() - t_start
             per.append(t)
+            rss_trace.append(proc.memory_info().rss / 2**20)
     rss_end = proc.memory_info().rss / 2**20
     producer.close()
     stages = {}
@@ -91,7 +95,20 @@ def bench(recipe: Recipe, samples: int = 5, threads: int = 0, progress: bool = T
         "rss_mb_after_warmup": rss_start,
         "rss_mb_end": rss_end,
         "rss_growth_mb": rss_end - rss_start,
+        "rss_mb_max": max(rss_trace, default=rss_start),
+        "rss_trend_mb_per_100": rss_trend_per_100(rss_trace),
+        "rss_trace_mb": [round(v, 1) for v in rss_trace],
     }
+
+
+def rss_trend_per_100(trace: list[float]) -> float | None:
+    """Least-squares slope of RSS over the second half of the samples, in MB per 100 samples: the steady-state
+    drift once caches and allocator pools have filled (None under 10 samples)."""
+    if len(trace) < 10:
+        return None
+    half = trace[len(trace) // 2:]
+    slope = np.polyfit(np.arange(len(half), dtype=float), np.asarray(half, dtype=float), 1)[0]
+    return float(slope * 100.0)
 
 
 def format_table(res: dict[str, Any]) -> str:
@@ -115,5 +132,8 @@ def format_table(res: dict[str, Any]) -> str:
                  f"{res['samples_per_hour_one_worker']:.0f} samples/h per worker at this thread count")
     if "rss_growth_mb" in res:
         lines.append(f"memory (RSS) {res['rss_mb_after_warmup']:.0f} MB after the warm-up, {res['rss_mb_end']:.0f} MB "
-                     f"after {res['samples']} samples: growth {res['rss_growth_mb']:+.1f} MB")
+                     f"after {res['samples']} samples: growth {res['rss_growth_mb']:+.1f} MB, max "
+                     f"{res.get('rss_mb_max', res['rss_mb_end']):.0f} MB")
+        if res.get("rss_trend_mb_per_100") is not None:
+            lines.append(f"RSS trend over the second half: {res['rss_trend_mb_per_100']:+.1f} MB per 100 samples")
     return "\n".join(lines)
