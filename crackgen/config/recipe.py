@@ -208,6 +208,10 @@ class CrackSection(Section):
     cells: _t(2, 200, integer=True) = _d({"choices": [6, 8, 10, 12, 16, 20]}, "network: Voronoi cells per patch (integer)")
     gaps: _t(0, 0.9) = _d({"min": 0.1, "max": 0.3}, "network: fraction of cell boundaries left uncracked")
     hairline_px: _t(0.5, 4) = _d({"min": 1.0, "max": 2.0}, "hairline: full width in camera pixels at the look-at point (px)")
+    wall: _t(0, 1, lo_open=True) = _d(
+        1.0, "fracture/network/hairline: share of the half-width the crack wall slopes over; 1 = V-groove, "
+             "smaller = steep walls and a flat floor (fraction)"
+    )
 
 
 class SurfaceSection(Section):

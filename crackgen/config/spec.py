@@ -71,6 +71,7 @@ class CrackSpec:
     cells: int = 0  # network: Voronoi cells
     gaps: float = 0.0  # network: fraction of boundaries left uncracked
     hairline_px: float = 1.5  # hairline: full width in camera pixels
+    wall: float = 1.0  # path families: share of the half-width the wall slopes over (1 = V-groove)
 
 
 @dataclass
@@ -414,6 +415,7 @@ def _crack(recipe: Recipe, rng: np.random.Generator) -> CrackSpec:
         cells=int(c.cells.draw(rng)),
         gaps=c.gaps.draw(rng),
         hairline_px=c.hairline_px.draw(rng),
+        wall=c.wall.draw(rng),  # appended last: the draws above are unchanged
     )
 
 

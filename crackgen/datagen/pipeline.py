@@ -191,7 +191,9 @@ class SampleProducer:
             caster = MeshRaycaster(vertices, np.asarray(surface_faces(g)), np.asarray(surface_uvs(g)))
         with tm.stage("groundtruth"):
             gt = view_ground_truth(rig.rgb, caster, cm.mask)
-            label = view_label(self.recipe.label, cm, gt, out.rgb, attempt)
+            # the visible label follows the groove the mesh renders, not only the crack map's mask
+            mesh_depth = mesh_depth_map(vertices, g, cm.size_px) if self.recipe.label.policy == "visible" else None
+            label = view_label(self.recipe.label, cm, gt, out.rgb, attempt, mesh_depth)
         if label.redraw:
             return None
         with tm.stage("groundtruth"):

@@ -6,7 +6,8 @@
 - ``fracture`` / ``network`` / ``hairline`` (``crackgen.procedural.crack_shapes``): centre-line
   paths with a half-width w along them. Z = d / w, the distance to the nearest path over the
   local half-width, clipped to 1; this is the same equation with t = 1: M = Z < 1,
-  D = M (1 - Z), depth = D * centre-line depth. So the crack is exactly 2 w wide, V-shaped.
+  D = M (1 - Z), depth = D * centre-line depth. So the crack is exactly 2 w wide, V-shaped;
+  ``wall`` < 1 makes the walls steeper, D = M min(1, (1 - Z) / wall), with a flat floor.
 - ``spec.present`` False (the recipe's crack-free share): an empty map, Z = t everywhere.
 
 Index convention (the renderer, ray caster and mesh rely on it): ``array[j, i]``; columns
@@ -90,6 +91,8 @@ def _check(spec: CrackSpec, size_px: int, size_m: float, pixel_m: float | None) 
         raise CrackMapError(f"crack.hairline_px must be > 0, got {spec.hairline_px!r}")
     if spec.shape == "network" and not (spec.cells >= 2 and 0 <= spec.gaps < 1):
         raise CrackMapError(f"crack.cells must be >= 2 and crack.gaps in [0, 1), got {spec.cells!r}, {spec.gaps!r}")
+    if not (np.isfinite(spec.wall) and 0 < spec.wall <= 1):
+        raise CrackMapError(f"crack.wall must be in (0, 1], got {spec.wall!r}")
     if not (np.isfinite(spec.jaggedness) and spec.jaggedness >= 0):
         raise CrackMapError(f"crack.jaggedness must be >= 0, got {spec.jaggedness!r}")
     if int(size_px) != size_px or size_px < 2:
@@ -151,7 +154,9 @@ def _fbm_layers(spec: CrackSpec, n: int) -> tuple[np.ndarray, ...]:
 
 
 def _path_layers(spec: CrackSpec, n: int, size_m: float, pixel_m: float | None) -> tuple[np.ndarray, ...]:
-    """Path families: Z = d / w (clipped to 1), M = Z < 1, D = 1 - Z inside, depth = D * centre depth."""
+    """Path families: Z = d / w (clipped to 1), M = Z < 1, D = min(1, (1 - Z) / wall) inside,
+    depth = D * centre depth. ``wall`` = 1 is the V-groove; smaller walls are steeper, with a flat
+    floor between them, as in an open fracture whose faces have pulled apart."""
     rng = np.random.default_rng(spec.shape_seed)
     centre_depth = spec.depth_m
     if spec.shape == "network":
@@ -165,6 +170,8 @@ def _path_layers(spec: CrackSpec, n: int, size_m: float, pixel_m: float | None) 
     z = render_paths(to_texels(paths, n), n)
     mask = z < np.float32(1.0)
     disp = np.where(mask, np.float32(1.0) - z, np.float32(0)).astype(np.float32)
+    if spec.wall < 1.0:
+        disp = np.minimum(disp / np.float32(spec.wall), np.float32(1.0))
     depth = (disp * np.float32(centre_depth)).astype(np.float32)
     return z, mask, disp, depth
 

@@ -21,7 +21,12 @@ import numpy as np
 
 from crackgen.config.recipe import LabelSection
 from crackgen.procedural.crackmap import CrackMap, nearest_texel
-from crackgen.procedural.visible_label import drop_small_components, visible_mask
+from crackgen.procedural.visible_label import (
+    VisibleLabelError,
+    drop_small_components,
+    groove_visible_mask,
+    visible_mask,
+)
 from crackgen.sim.raycast import MeshRaycaster, RayHits
 from crackgen.sim.visibility import decide_label, label_contrast
 from fusion.camera import Camera
@@ -62,21 +67,34 @@ class ViewLabel:
     meta: dict[str, Any] = field(default_factory=dict)  # meta["label"]
 
 
-def label_texels(cfg: LabelSection, cm: CrackMap) -> np.ndarray:
-    """Bool crack-map texels that are labelled crack under ``cfg.policy``."""
+def label_texels(cfg: LabelSection, cm: CrackMap, mesh_depth_m: np.ndarray | None = None) -> np.ndarray:
+    """Bool crack-map texels that are labelled crack under ``cfg.policy``.
+
+    ``mesh_depth_m``: the rendered mesh's depth (m) at the crack map's texel centres
+    (``surface.mesh_depth_map``). Given, the visible label also takes the visible part of
+    the groove the mesh renders (``groove_visible_mask``), which is wider than the crack
+    map's mask for cracks narrower than the vertex footprint."""
     if cfg.policy == "thesis":
         return cm.mask
-    return visible_mask(cm.mask, cm.depth_m, cm.texel_m, depth_ratio=cfg.depth_ratio,
-                        min_depth_m=cfg.min_depth_m, skel=cm.skeleton)
+    label = visible_mask(cm.mask, cm.depth_m, cm.texel_m, depth_ratio=cfg.depth_ratio,
+                         min_depth_m=cfg.min_depth_m, skel=cm.skeleton)
+    if mesh_depth_m is not None:
+        if np.shape(mesh_depth_m) != cm.mask.shape:
+            raise VisibleLabelError(f"mesh_depth_m must have the crack map's shape {cm.mask.shape}, got {np.shape(mesh_depth_m)}")
+        label |= groove_visible_mask(mesh_depth_m, cm.texel_m, depth_ratio=cfg.depth_ratio,
+                                     min_depth_m=cfg.min_depth_m)
+    return label
 
 
-def view_label(cfg: LabelSection, cm: CrackMap, gt: ViewGroundTruth, rgb: np.ndarray, attempt: int = 0) -> ViewLabel:
-    """Label of the view ``gt`` was cast for, checked on the clean render ``rgb``."""
+def view_label(cfg: LabelSection, cm: CrackMap, gt: ViewGroundTruth, rgb: np.ndarray, attempt: int = 0,
+               mesh_depth_m: np.ndarray | None = None) -> ViewLabel:
+    """Label of the view ``gt`` was cast for, checked on the clean render ``rgb``
+    (``mesh_depth_m``: see ``label_texels``)."""
     thesis = gt.mask
     if cfg.policy == "thesis":
         label = thesis.copy()
     else:
-        label = (mask_lookup(label_texels(cfg, cm), gt.uv) * 255).astype(np.uint8)
+        label = (mask_lookup(label_texels(cfg, cm, mesh_depth_m), gt.uv) * 255).astype(np.uint8)
         label = drop_small_components(label, cfg.min_component_px)
     px = int(np.count_nonzero(label))
     contrast = label_contrast(rgb, label)

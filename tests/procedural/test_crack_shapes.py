@@ -249,3 +249,26 @@ def test_main_crack_cut_to_its_tips_is_dropped_not_nan():
         s = make_spec(recipe, index)
         cm = crack_map(s.crack, 512, s.surface.size_m, pixel_m=pixel_footprint_m(s.camera), measure=False)
         assert np.isfinite(cm.depth_m).all() and cm.mask.any()
+
+
+def test_steep_walls_keep_the_width_and_deepen_the_floor():
+    """``wall`` < 1: same mask (the width is the recipe's), depth = min(1, (1 - Z) / wall) * centre depth."""
+    v = crack_map(_crack(3, wall=1.0, width_m=0.02, depth_m=0.02), 512, 1.0)
+    u = crack_map(_crack(3, wall=0.25, width_m=0.02, depth_m=0.02), 512, 1.0)
+    np.testing.assert_array_equal(u.mask, v.mask)
+    np.testing.assert_array_equal(u.z, v.z)
+    inside = v.mask
+    np.testing.assert_allclose(u.depth_m[inside], 0.02 * np.minimum(1.0, (1.0 - v.z[inside]) / 0.25), rtol=1e-5)
+    floor = inside & (v.z <= 0.75)
+    assert floor.any() and np.allclose(u.depth_m[floor], 0.02)
+    assert (u.depth_m >= v.depth_m).all()
+    with pytest.raises(CrackMapError, match="crack.wall"):
+        crack_map(_crack(3, wall=0.0), 64, 1.0)
+
+
+def test_wall_is_drawn_last_so_other_crack_draws_do_not_move():
+    steep = parse_recipe('[crack]\nshape = "fracture"\nwall = { min = 0.2, max = 0.5 }\n')
+    for i in range(3):
+        a, b = make_spec(FRACTURE, i).crack, make_spec(steep, i).crack
+        assert a.wall == 1.0 and 0.2 <= b.wall <= 0.5
+        assert dataclasses.replace(b, wall=1.0) == a

@@ -1,6 +1,7 @@
 """[label] in the pipeline (tiny renders): mask_thesis.png is written and read back; redraws are deterministic."""
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 from tiny_recipes import tiny_recipe
@@ -21,7 +22,9 @@ def test_visible_policy_writes_both_labels_and_they_read_back(tmp_path):
     m, meta = s.members, s.meta
     assert {"mask.png", "mask_thesis.png"} <= set(m)
     vis, thesis = m["mask.png"] > 0, m["mask_thesis.png"] > 0
-    assert not (vis & ~thesis).any()  # the visible label lies inside the thesis mask
+    # inside the thesis mask, or on the walls of the rendered groove just beside it (tests/sim/test_groove_label.py)
+    near_thesis = cv2.dilate(thesis.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    assert not (vis & ~near_thesis).any()
     lab = meta["label"]
     assert lab["policy"] == "visible" and lab["attempt"] == 0 and lab["action"] in ("ok", "empty")
     assert lab["pixel_fraction"] == pytest.approx(vis.mean())
