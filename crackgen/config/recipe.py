@@ -455,6 +455,10 @@ class CameraEffectsSection(Section):
     noise_read_e: _t(0, 1e4) = _d({"min": 1.0, "max": 5.0}, "read-noise std (electrons)")
     jpeg: float = Field(0.5, ge=0, le=1, description="probability of JPEG re-compression (0..1)")
     jpeg_quality: _t(1, 100) = _d({"min": 60.0, "max": 95.0}, "JPEG quality (1-100, rounded to an integer)")
+    auto_exposure: float = Field(0.0, ge=0, le=1, description="probability of auto exposure: the gain that brings the "
+                                 "image's mean luma to a drawn target, before any exposure error (0..1)")
+    auto_exposure_luma: _t(1, 254) = _d({"min": 100.0, "max": 180.0},
+                                        "auto exposure: target mean luma of the sRGB image (0-255)")
 
 
 class LabelSection(Section):

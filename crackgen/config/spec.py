@@ -291,6 +291,7 @@ class CameraEffectsSpec:
     noise_read_e: float = 0.0  # read-noise std (electrons)
     jpeg_quality: int = 0
     seed: int = 0  # seeds the sensor noise
+    auto_exposure_luma: float = 0.0  # target mean sRGB luma (0-255) of auto exposure
 
 
 @dataclass
@@ -596,6 +597,11 @@ def draw_adapt(a: AdaptSection, rng: np.random.Generator) -> AdaptSpec:
                      target=a.target, target_fraction=fraction)
 
 
+# The order the camera-effects stage applies them (crackgen.postrender.camera_effects.EFFECTS, tested equal).
+CAMERA_EFFECTS_ORDER = ("auto_exposure", "exposure", "white_balance", "tone", "vignetting", "defocus", "motion_blur",
+                        "noise", "jpeg")
+
+
 def draw_camera_effects(c: CameraEffectsSection, rng: np.random.Generator) -> CameraEffectsSpec:
     """Every draw is made even when the section or an effect is off, so toggling one moves nothing.
 
@@ -619,10 +625,13 @@ def draw_camera_effects(c: CameraEffectsSection, rng: np.random.Generator) -> Ca
         "jpeg": (coin(c.jpeg), {"jpeg_quality": int(round(float(c.jpeg_quality.draw(rng))))}),
     }
     seed = _seed(rng)
+    # appended after the seed, so adding auto exposure moved none of the draws above
+    on["auto_exposure"] = (coin(c.auto_exposure), {"auto_exposure_luma": float(c.auto_exposure_luma.draw(rng))})
     if not c.enabled:
         return CameraEffectsSpec()
     spec = CameraEffectsSpec(enabled=True, seed=seed)
-    for name, (applied, values) in on.items():
+    for name in CAMERA_EFFECTS_ORDER:
+        applied, values = on[name]
         if applied:
             spec.applied.append(name)
             for k, v in values.items():

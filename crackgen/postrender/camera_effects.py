@@ -6,7 +6,9 @@ A model trained only on clean renders learns to rely on that cleanliness.
 
 Order (one pass per view; physics first, then the camera's processing):
 1. decode 8-bit sRGB to linear light (exact sRGB transfer function);
-2. exposure: ``x * 2**ev`` (scene light reaching the sensor);
+2. auto exposure: the gain g that brings the mean luma of the sRGB-encoded ``g * x`` to the drawn
+   target (solved on the first view, applied to every view), as a camera's metering does; then
+   exposure: ``x * 2**ev`` (scene light reaching the sensor, the metering's error);
 3. vignetting: ``x * (1 - s * (r / r_corner)**2)`` (lens falloff, centre = 1);
 4. defocus blur (disk or Gaussian PSF), then motion blur (line PSF): optics, in linear light;
 5. Poisson-Gaussian sensor noise: ``e = Poisson(x * full_well) + Normal(0, read)``, ``x = e / full_well``,
@@ -29,7 +31,7 @@ from typing import Any, Sequence
 import cv2
 import numpy as np
 
-EFFECTS = ("exposure", "white_balance", "tone", "vignetting", "defocus", "motion_blur", "noise", "jpeg")
+EFFECTS = ("auto_exposure", "exposure", "white_balance", "tone", "vignetting", "defocus", "motion_blur", "noise", "jpeg")
 WB_REFERENCE_K = 6500.0  # the white point the camera assumes (D65-like)
 WB_WAVELENGTHS_NM = (610.0, 550.0, 465.0)  # narrow-band stand-ins for the R, G, B channels
 
@@ -116,6 +118,26 @@ def motion_kernel(length_px: float, angle_deg: float, supersample: int = 8) -> n
     return k / k.sum()
 
 
+def auto_exposure_gain(u8: np.ndarray, target_luma: float, iterations: int = 40) -> float:
+    """Linear gain g whose sRGB image ``g * x`` (clipped) has mean luma ``target_luma`` (0-255; luma
+    as ``crackgen stats`` measures it: Rec.601 weights on the sRGB values, OpenCV's grey).
+
+    Solved by bisection on log2(g) over a 64-px-wide copy (mean luma rises monotonically with g);
+    capped at +-8 EV so a black or white frame stays finite."""
+    small = cv2.resize(np.asarray(u8), (64, max(1, round(64 * u8.shape[0] / u8.shape[1]))), interpolation=cv2.INTER_AREA)
+    lin = srgb_to_linear(small)
+    weights = np.array([0.299, 0.587, 0.114], np.float32)
+    target = float(np.clip(target_luma, 1.0, 254.0)) / 255.0
+    lo, hi = -8.0, 8.0
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        if float((linear_to_srgb(lin * np.float32(2.0**mid)) @ weights).mean()) < target:
+            lo = mid
+        else:
+            hi = mid
+    return float(2.0 ** (0.5 * (lo + hi)))
+
+
 def convolve(lin: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     """Convolve every channel (edges reflected, so the border keeps its brightness)."""
     return cv2.filter2D(lin, -1, kernel, borderType=cv2.BORDER_REFLECT101)
@@ -150,14 +172,17 @@ def apply_camera_effects(views: Sequence[np.ndarray], spec: Any) -> list[np.ndar
     views = [np.asarray(v) for v in views]
     if not spec.enabled or not spec.applied:
         return views
-    return [_apply_one(v, spec) for v in views]
+    gain = auto_exposure_gain(views[0], spec.auto_exposure_luma) if "auto_exposure" in spec.applied else 1.0
+    return [_apply_one(v, spec, gain) for v in views]
 
 
-def _apply_one(rgb: np.ndarray, s: Any) -> np.ndarray:
+def _apply_one(rgb: np.ndarray, s: Any, gain: float = 1.0) -> np.ndarray:
     if rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
         raise ValueError(f"camera_effects: expected uint8 HxWx3 RGB, got {rgb.dtype} {rgb.shape}")
     on = set(s.applied)
     lin = srgb_to_linear(rgb)
+    if "auto_exposure" in on:
+        lin = lin * np.float32(gain)
     if "exposure" in on:
         lin = lin * np.float32(2.0**s.exposure_ev)
     if "vignetting" in on:
@@ -189,6 +214,8 @@ def describe(spec: Any) -> dict[str, Any]:
         return {"applied": []}
     on = set(spec.applied)
     meta: dict[str, Any] = {"applied": list(spec.applied)}
+    if "auto_exposure" in on:
+        meta["auto_exposure_luma"] = spec.auto_exposure_luma
     if "exposure" in on:
         meta["exposure_ev"] = spec.exposure_ev
     if "white_balance" in on:

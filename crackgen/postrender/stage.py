@@ -13,7 +13,7 @@ import numpy as np
 
 from crackgen.config.spec import AdaptSpec, CameraEffectsSpec
 from crackgen.postrender.adapt import adapt_views
-from crackgen.postrender.camera_effects import apply_camera_effects, describe
+from crackgen.postrender.camera_effects import apply_camera_effects, auto_exposure_gain, describe
 from crackgen.postrender.targets import TargetPhotos
 from crackgen.shards.members import RGB_MEMBERS
 
@@ -44,7 +44,10 @@ def camera_effects_members(spec: CameraEffectsSpec, members: Mapping[str, Any]) 
     meta = describe(spec)
     if not meta["applied"]:
         return dict(members), meta
+    views = [np.asarray(members[n]) for n in names]
+    if "auto_exposure" in spec.applied:  # the gain the metering chose (cheap: a 64-px bisection)
+        meta["auto_exposure_ev"] = round(float(np.log2(auto_exposure_gain(views[0], spec.auto_exposure_luma))), 4)
     out = dict(members)
-    out.update(zip(names, apply_camera_effects([np.asarray(members[n]) for n in names], spec)))
+    out.update(zip(names, apply_camera_effects(views, spec)))
     meta["views"] = [n.split(".")[0] for n in names]
     return out, meta

@@ -61,6 +61,44 @@ def test_plus_one_ev_doubles_linear_light_until_it_clips():
     np.testing.assert_allclose(ce.srgb_to_linear(dark), lin_in / 2, rtol=0.03, atol=2e-3)
 
 
+@pytest.mark.parametrize("start, target", [(40, 150), (200, 110), (120, 120)])
+def test_auto_exposure_brings_the_mean_luma_to_its_target(start, target):
+    rng = np.random.default_rng(3)
+    img = np.clip(rng.normal(start, 0.15 * start, (96, 128, 3)), 0, 255).astype(np.uint8)
+    (out,) = ce.apply_camera_effects([img], spec("auto_exposure", auto_exposure_luma=float(target)))
+    luma = cv2.cvtColor(out, cv2.COLOR_RGB2GRAY).astype(np.float64).mean()
+    assert luma == pytest.approx(target, abs=2.5)
+    g = ce.auto_exposure_gain(img, target)
+    assert (g > 1) == (target > cv2.cvtColor(img, cv2.COLOR_RGB2GRAY).mean() + 3) or start == target
+
+
+def test_auto_exposure_is_one_gain_for_every_view_and_recorded():
+    left, right = textured(4), textured(5)
+    s = spec("auto_exposure", auto_exposure_luma=170.0)
+    out_l, out_r = ce.apply_camera_effects([left, right], s)
+    g = ce.auto_exposure_gain(left, 170.0)
+    for src, out in ((left, out_l), (right, out_r)):  # the left view's gain on both, not each its own
+        np.testing.assert_array_equal(out, ce.quantise(ce.linear_to_srgb(ce.srgb_to_linear(src) * np.float32(g))))
+    _, meta = camera_effects_members(s, {"rgb.png": left, "right.png": right})
+    assert meta["auto_exposure_luma"] == 170.0 and meta["auto_exposure_ev"] == pytest.approx(np.log2(g), abs=1e-4)
+
+
+def test_auto_exposure_draws_leave_the_other_effects_unchanged():
+    base = "[camera_effects]\nenabled = true\n"
+    a = [make_spec(parse_recipe(base), i).camera_effects for i in range(20)]
+    b = [make_spec(parse_recipe(base + "auto_exposure = 1.0\n"), i).camera_effects for i in range(20)]
+    for x, y in zip(a, b):
+        assert y.applied[0] == "auto_exposure" and y.applied[1:] == x.applied and 100 <= y.auto_exposure_luma <= 180
+        assert {k: v for k, v in vars(y).items() if k not in ("applied", "auto_exposure_luma")} == \
+            {k: v for k, v in vars(x).items() if k not in ("applied", "auto_exposure_luma")}
+
+
+def test_stage_order_matches_the_spec_order():
+    from crackgen.config.spec import CAMERA_EFFECTS_ORDER
+
+    assert CAMERA_EFFECTS_ORDER == ce.EFFECTS
+
+
 def test_vignetting_darkens_corners_not_the_centre():
     img = flat(180, 65, 81)
     (out,) = ce.apply_camera_effects([img], spec("vignetting", vignette_strength=0.4))
