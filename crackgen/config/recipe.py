@@ -176,7 +176,7 @@ def _d(default: Any, doc: str) -> Any:
 
 
 FAMILIES = ("asphalt", "concrete", "masonry", "steel", "blockwork", "photo")  # = blender_assets/materials/*.toml
-CLUTTER_KINDS = ("pores", "gaps", "stains", "moss", "patch")  # = crackgen.procedural.clutter.CLUTTER
+CLUTTER_KINDS = ("pores", "gaps", "stains", "moss", "patch", "voids")  # append only: new kinds draw last  # = crackgen.procedural.clutter.CLUTTER
 SHAPES = ("fbm", "fracture", "network", "hairline")  # = crackgen.procedural.crack_shapes
 
 
@@ -235,6 +235,7 @@ class ClutterSection(Section):
     stains: float = Field(0.0, ge=0, le=1, description="probability of small stains (grime and rust spots)")
     moss: float = Field(0.0, ge=0, le=1, description="probability of moss / lichen in low areas")
     patch: float = Field(0.0, ge=0, le=1, description="probability of a paint or patch repair (other material, visible edge)")
+    voids: float = Field(0.0, ge=0, le=1, description="probability of bugholes / surface voids (sparse dark holes, 3-24 mm)")
     amount: _t(0, 1) = _d({"min": 0.3, "max": 1.0}, "amount (number / coverage) of each present kind, fraction of its maximum")
 
 

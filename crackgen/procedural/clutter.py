@@ -107,6 +107,31 @@ def pores(rng: np.random.Generator, grid: TexGrid, amount: float, albedo, roughn
     return mask
 
 
+def voids(rng: np.random.Generator, grid: TexGrid, amount: float, albedo, roughness, height) -> np.ndarray:
+    """Bugholes and surface voids: sparse dark holes 3-24 mm across with ragged outlines, a
+    shadowed side and a darker core. Why: on real photos the pore-sized painter (``pores``, up to
+    5 mm) leaves the larger dark blobs of concrete and open asphalt as the main false positive
+    of a model trained on renders; these are compact (round to oblong), never long."""
+    r_lo, r_hi = 0.0015, float(rng.uniform(0.005, 0.012))
+    cell = 3.0 * r_hi
+    presence = float(np.clip(amount * rng.uniform(0.05, 0.25), 0.0, 1.0))
+    d1, _, near, ox, oy, n = worley(grid, cell, presence, rng)
+    radius = np.exp(rng.uniform(math.log(r_lo), math.log(r_hi), n * n))  # log-uniform: few large voids
+    r_px = np.maximum(radius[np.maximum(near, 0)], grid.texel_m)
+    ragged = grid.field(_seed(rng), 1.5 * r_hi, 2) * np.float32(rng.uniform(0.1, 0.25))
+    rn = np.where(near >= 0, d1 / r_px, 9.0).astype(np.float32) * (1.0 + ragged)
+    w, mask = _cut(smoothstep(1.1, 0.9, rn))
+    phi = rng.uniform(0.0, 2.0 * math.pi)
+    side = np.clip((ox * math.cos(phi) + oy * math.sin(phi)) / r_px, -1.0, 1.0).astype(np.float32)
+    core = np.clip(1.0 - rn, 0.0, 1.0)  # 1 at the centre, 0 at the edge
+    dark = np.float32(rng.uniform(0.08, 0.35)) * (1.0 + 0.7 * side) * (1.0 - 0.5 * core)
+    albedo *= (1.0 - (1.0 - dark) * w)[..., None]
+    roughness += w * (np.float32(0.95) - roughness)
+    bowl = np.sqrt(np.clip(1.0 - rn * rn, 0.0, 1.0)).astype(np.float32)
+    height -= (r_px * np.float32(rng.uniform(0.5, 1.0))).astype(np.float32) * bowl * (w > 0)
+    return mask
+
+
 def gaps(rng: np.random.Generator, grid: TexGrid, amount: float, albedo, roughness, height) -> np.ndarray:
     """Aggregate gaps: thin dark curved gaps along the borders of exposed stones (Voronoi
     edges), kept only in short pieces so they stay short and closed, never long cracks."""
@@ -197,6 +222,7 @@ CLUTTER: dict[str, Callable[..., np.ndarray]] = {
     "stains": stains,
     "moss": moss,
     "patch": patch,
+    "voids": voids,
 }
 
 

@@ -119,3 +119,27 @@ def test_clutter_draws_are_appended_and_follow_the_recipe():
             b.material, **{k: None for k in keep})
         for name in ("crack", "lights", "camera", "shadow", "surface"):
             assert getattr(a, name) == getattr(b, name)
+
+
+def test_voids_are_compact_dark_holes_larger_than_pores(cm):
+    """Bugholes: dark, dented, 3-24 mm across and compact (no long thin shapes a model could take for a crack)."""
+    from scipy import ndimage
+
+    flat = dataclasses.replace(empty_like(cm), size_m=0.3)  # 2.3 mm texels over 0.3 m
+    base = material_maps(mspec(), flat)
+    v = material_maps(mspec(clutter=[ClutterSpec("voids", 7, 1.0)]), flat)
+    p = material_maps(mspec(clutter=[ClutterSpec("pores", 7, 1.0)]), flat)
+    core = v.clutter_mask & (lum(v) < 0.5 * lum(base))
+    assert v.height_m[core].mean() < base.height_m[core].mean()
+    lab, n = ndimage.label(v.clutter_mask)
+    assert n >= 3
+    texel_mm = 300 / 128
+    sizes = []
+    for sl in ndimage.find_objects(lab):
+        h, w = (sl[0].stop - sl[0].start) * texel_mm, (sl[1].stop - sl[1].start) * texel_mm
+        sizes.append(max(h, w))
+        assert max(h, w) <= 24 * 1.4 + 2 * texel_mm  # ragged outline: at most ~40% over the nominal size
+        assert max(h, w) / max(min(h, w), texel_mm) < 3.5  # compact, never crack-like
+    assert np.median(sizes) > 3.0
+    lab_p, n_p = ndimage.label(p.clutter_mask)
+    assert v.clutter_mask.sum() / n > p.clutter_mask.sum() / max(n_p, 1)  # larger than pores, on average
