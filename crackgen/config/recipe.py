@@ -256,7 +256,7 @@ class MaterialSection(Section):
     crack_spall: float = Field(0.0, ge=0, le=1, description="probability of spalled (chipped) crack edges, unlabelled")
     photo_folder: str = Field("", max_length=4096, description='folder of crack-free surface photos for family "photo"')
     photo_size_m: _t(0.01, 100) = _d({"min": 0.3, "max": 1.0}, "surface side covered by one photo side (m)")
-    photo_clean: _c("none", "blackhat") = _d("blackhat", "photo: suppress thin dark lines (possible cracks) before use")
+    photo_clean: _c("none", "blackhat", "wide") = _d("blackhat", "photo: suppress dark lines (possible cracks) before use: blackhat (thin lines) or wide (also wide open cracks)")
     clutter: ClutterSection = Field(default_factory=ClutterSection)
 
     @model_validator(mode="after")

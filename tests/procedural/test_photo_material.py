@@ -104,6 +104,26 @@ def test_blackhat_removes_a_thin_dark_line_but_keeps_a_round_pore():
     assert not removed[115:126, 45:56].any()
 
 
+def test_wide_clean_also_removes_a_wide_open_crack_that_blackhat_keeps():
+    from crackgen.procedural.photo import photo_maps
+    from crackgen.procedural.texgrid import TexGrid
+
+    img = np.full((240, 240, 3), 170, np.uint8)
+    img += np.random.default_rng(1).integers(0, 8, img.shape, dtype=np.uint8)
+    cv2.line(img, (10, 60), (230, 180), (25, 25, 25), 22)  # 22 px wide: beyond the thin pass (~12 px)
+    cv2.circle(img, (60, 200), 4, (30, 30, 30), -1)
+    grid = TexGrid(240, 1.0)
+
+    def darkest_band(clean):
+        albedo, _, _ = photo_maps(img, grid, 1.0, clean, PhotoLook(albedo_mean=(0.3, 0.3)),
+                                  np.random.default_rng(0))
+        lum = albedo.mean(-1)
+        return float(np.percentile(lum, 3) / np.median(lum))
+
+    assert darkest_band("blackhat") < 0.3  # the wide crack survives the thin pass
+    assert darkest_band("wide") > 0.5  # and is gone after the wide one
+
+
 def test_photo_clean_runs_inside_the_family(tmp_path):
     d = tmp_path / "lined"
     d.mkdir()
