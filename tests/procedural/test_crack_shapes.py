@@ -236,7 +236,7 @@ def test_pixel_footprint():
 
 def test_main_crack_cut_to_its_tips_is_dropped_not_nan():
     """Regression: closeup.toml samples 291 and 324 cut a second main crack down to two points
-    (both tips), whose width profile was 0/0 = NaN and failed the sample (that recipe is frozen in data/)."""
+    (both tips), whose width profile was 0/0 = NaN and failed the sample (that recipe is frozen in fixtures/)."""
     from crackgen.config.recipe import load_recipe
     from crackgen.config.spec import make_spec, pixel_footprint_m
     from crackgen.procedural.crack_shapes.fracture import main_profile
@@ -244,7 +244,7 @@ def test_main_crack_cut_to_its_tips_is_dropped_not_nan():
     assert np.array_equal(main_profile(np.array([0.0, 1.0]), np.random.default_rng(0)), [0.0, 0.0])
     import pathlib
 
-    recipe = load_recipe(pathlib.Path(__file__).resolve().parent / "data" / "closeup_regression.toml")
+    recipe = load_recipe(pathlib.Path(__file__).resolve().parent / "fixtures" / "closeup_regression.toml")
     for index in (291, 324):
         s = make_spec(recipe, index)
         cm = crack_map(s.crack, 512, s.surface.size_m, pixel_m=pixel_footprint_m(s.camera), measure=False)
