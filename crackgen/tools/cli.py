@@ -14,6 +14,7 @@ from crackgen import __version__
 
 EXIT_BAD_INPUT = 1
 EXIT_RUN_FAILED = 3
+SET_HELP = "change a recipe field, e.g. crack.shape=fbm or camera.distance_m='{ min = 0.6, max = 1.2 }' (repeatable)"
 
 
 def _err(msg: str) -> int:
@@ -21,12 +22,13 @@ def _err(msg: str) -> int:
     return EXIT_BAD_INPUT
 
 
-def _load(path: str):
-    """The recipe, or None after printing its problems (one line each)."""
+def _load(path: str, sets: list[str] | None = None):
+    """The recipe (with any ``--set`` overrides), or None after printing its problems (one line each)."""
     from crackgen.config.recipe import RecipeError, load_recipe
+    from crackgen.config.recipe_overrides import apply_sets
 
     try:
-        return load_recipe(path)
+        return apply_sets(load_recipe(path), sets or [], path)
     except RecipeError as exc:
         for line in exc.problems:
             print(line, file=sys.stderr)
@@ -37,7 +39,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     from crackgen.config.recipe import summary
     from crackgen.datagen.generate import GenerateError, check_inputs
 
-    recipe = _load(args.recipe)
+    recipe = _load(args.recipe, args.set)
     if recipe is None:
         return EXIT_BAD_INPUT
     try:
@@ -52,7 +54,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 def _cmd_generate(args: argparse.Namespace) -> int:
     from crackgen.datagen.generate import GenerateError, GenerateOptions, generate, parse_storage_options
 
-    recipe = _load(args.recipe)
+    recipe = _load(args.recipe, args.set)
     if recipe is None:
         return EXIT_BAD_INPUT
     try:
@@ -220,6 +222,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--backend", choices=tuple(BACKENDS), default="local", help="local process pool or Ray tasks")
     g.add_argument("--ray-address", default=None, help="Ray cluster address (default: start a local Ray)")
     g.add_argument("--samples", type=int, default=None, help="override dataset.samples (changes the recipe hash)")
+    g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=SET_HELP)
     g.add_argument("--resume", action="store_true", help="continue a dataset: keep verified shards, redo the rest")
     g.add_argument("--storage-options", default=None,
                    help="fsspec storage options as JSON (default: $CRACKGEN_STORAGE_OPTIONS)")
@@ -229,6 +232,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     v = sub.add_parser("validate", help="check a recipe and print its summary")
     v.add_argument("recipe")
+    v.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=SET_HELP)
     v.set_defaults(func=_cmd_validate)
 
     i = sub.add_parser("inspect", help="write an HTML gallery DIR/inspect/index.html and a contact sheet")

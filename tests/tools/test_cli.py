@@ -87,3 +87,14 @@ def test_inspect_and_show_missing_dir(tmp_path, capsys):
     assert "not found" in capsys.readouterr().err
     assert main(["show", str(tmp_path / "nope"), "000000-00000", "--pointcloud", str(tmp_path / "x.ply")]) == 1
     assert "not found" in capsys.readouterr().err
+
+
+def test_validate_and_generate_take_set_overrides(tmp_path, capsys):
+    demo = str(ROOT / "recipes" / "demo.toml")
+    assert main(["validate", demo, "--set", "render.samples=3"]) == 0
+    assert "OK" in capsys.readouterr().out
+    out = tmp_path / "ds"
+    assert main(["generate", demo, "--out", str(out), "--set", "render.sampels=3"]) == 1
+    err = capsys.readouterr().err
+    assert "render.sampels" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
