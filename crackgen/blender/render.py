@@ -100,6 +100,13 @@ def select_device(scene: bpy.types.Scene, device: str) -> str:
     return "cpu"
 
 
+def set_multilayer_exr(settings: Any) -> None:
+    """Blender 5.0 chooses multilayer output by media type (file formats follow); 4.5 by file format."""
+    if "media_type" in settings.bl_rna.properties:
+        settings.media_type = "MULTI_LAYER_IMAGE"
+    settings.file_format = "OPEN_EXR_MULTILAYER"
+
+
 def configure_scene(scene: bpy.types.Scene, width: int, height: int, persistent_data: bool = False) -> None:
     """Once per worker: Cycles, passes, colour management, output file format."""
     scene.render.engine = "CYCLES"
@@ -128,7 +135,7 @@ def configure_scene(scene: bpy.types.Scene, width: int, height: int, persistent_
     vl.use_pass_combined = True
     vl.use_pass_z = True
     s = scene.render.image_settings
-    s.file_format = "OPEN_EXR_MULTILAYER"
+    set_multilayer_exr(s)
     s.color_depth = "32"
     s.exr_codec = "NONE"
     s.color_mode = "RGBA"
@@ -188,8 +195,15 @@ def linear_to_srgb8(rgb: np.ndarray) -> np.ndarray:
     return np.round(s * 255.0).astype(np.uint8)
 
 
-def read_render_exr(path: str) -> tuple[np.ndarray, np.ndarray]:
-    """Blender multilayer EXR -> (linear RGB (H,W,3) float32, depth (H,W) float32, -1 = none), top row first."""
+BPY_WRITES_NO_PASSES = bpy.app.version >= (5, 0, 0)  # bpy 5.0.1 as a module saves only Combined (measured)
+
+
+def read_render_exr(path: str, depth_optional: bool = BPY_WRITES_NO_PASSES) -> tuple[np.ndarray, np.ndarray]:
+    """Blender multilayer EXR -> (linear RGB (H,W,3) float32, depth (H,W) float32, -1 = none), top row first.
+
+    ``depth_optional``: a file without a Depth pass gives an all -1 depth instead of an error;
+    the ray-cast depth is the depth member, the render's is only a cross-check.
+    """
     try:
         with OpenEXR.File(path, separate_channels=True) as f:
             ch = f.channels()
@@ -202,7 +216,10 @@ def read_render_exr(path: str) -> tuple[np.ndarray, np.ndarray]:
                 return np.asarray(ch[hit[0]].pixels, dtype=np.float32)
 
             rgb = np.stack([get("Combined.R"), get("Combined.G"), get("Combined.B")], axis=-1)
-            depth = get("Depth.Z")
+            if depth_optional and not any(n.endswith("Depth.Z") for n in names):
+                depth = np.full(rgb.shape[:2], -1.0, dtype=np.float32)
+            else:
+                depth = get("Depth.Z")
     except RenderError:
         raise
     except Exception as exc:  # OpenEXR raises bare RuntimeErrors
