@@ -209,17 +209,18 @@ def read_render_exr(path: str, depth_optional: bool = BPY_WRITES_NO_PASSES) -> t
             ch = f.channels()
             names = list(ch)
 
-            def get(suffix: str) -> np.ndarray:
+            def get(suffix: str, optional: bool = False) -> np.ndarray | None:
                 hit = [n for n in names if n.endswith(suffix)]
                 if not hit:
+                    if optional:
+                        return None
                     raise RenderError(f"{path}: render has no channel '*{suffix}' (channels: {names})")
                 return np.asarray(ch[hit[0]].pixels, dtype=np.float32)
 
             rgb = np.stack([get("Combined.R"), get("Combined.G"), get("Combined.B")], axis=-1)
-            if depth_optional and not any(n.endswith("Depth.Z") for n in names):
+            depth = get("Depth.Z", optional=depth_optional)
+            if depth is None:
                 depth = np.full(rgb.shape[:2], -1.0, dtype=np.float32)
-            else:
-                depth = get("Depth.Z")
     except RenderError:
         raise
     except Exception as exc:  # OpenEXR raises bare RuntimeErrors
