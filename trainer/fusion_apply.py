@@ -57,7 +57,7 @@ def fuse_scene(model: ConfidenceCNN, cfg: dict[str, Any], x: np.ndarray, device:
     x = x.copy()
     if post is not None and post.stage == "before":
         x[..., 0], x[..., 1] = post.apply(x[..., 0]), post.apply(x[..., 1])
-    c = predict_confidence(model, x, cfg["mean"], cfg["std"], device)
+    c = predict_confidence(model, x, cfg["mean"], cfg["std"], device, cfg.get("disp_ref", "none"))
     out = {"conf_stereo": c[0], "conf_other": c[1], "stereo": x[..., 0], "other": x[..., 1],
            "fused_max": fuse_max(x[..., 0], x[..., 1], c[0], c[1]),
            "fused_weighted": fuse_weighted(x[..., 0], x[..., 1], c[0], c[1]),

@@ -114,10 +114,40 @@ def shard_keys(path: str | Path) -> list[str]:
 
 # ------------------------------------------------------------------ normalisation and patches
 
-def channel_stats(scenes: Sequence[FusionScene]) -> tuple[list[float], list[float]]:
-    """Per-channel mean and std over all pixels of ``scenes``, stored in the checkpoint so that
-    training, evaluation and ``fuse`` normalise identically."""
-    x = np.concatenate([s.x.reshape(-1, s.x.shape[-1]) for s in scenes]).astype(np.float64)
+DISP_REFS = ("none", "median")
+
+
+def disparity_reference(x: np.ndarray, mode: str) -> float:
+    """The per-scene offset taken off both disparity channels before standardising.
+
+    ``median``: the median of the ToF/LiDAR candidate over its valid pixels, so the
+    network sees disparities relative to the scene's own level (in px) instead of
+    the training renders' absolute range, which real scenes leave (2-55 px against
+    the renders' 20-35 px). ``none``: the thesis's absolute disparities.
+    """
+    if mode == "none":
+        return 0.0
+    if mode != "median":
+        raise TrainerInputError(f"unknown disparity reference {mode!r}; choose from {', '.join(DISP_REFS)}")
+    other = x[..., 1]
+    ok = np.isfinite(other) & (other > 0)
+    return float(np.median(other[ok])) if ok.any() else 0.0
+
+
+def relative_input(x: np.ndarray, ref: float) -> np.ndarray:
+    """(…,C) raw channels with ``ref`` taken off the two disparity channels (0 and 1)."""
+    if ref == 0.0:
+        return x
+    x = x.astype(np.float32, copy=True)
+    x[..., :2] -= np.float32(ref)
+    return x
+
+
+def channel_stats(scenes: Sequence[FusionScene], disp_ref: str = "none") -> tuple[list[float], list[float]]:
+    """Per-channel mean and std over all pixels of ``scenes`` (after the disparity reference),
+    stored in the checkpoint so that training, evaluation and ``fuse`` normalise identically."""
+    x = np.concatenate([relative_input(s.x, disparity_reference(s.x, disp_ref)).reshape(-1, s.x.shape[-1])
+                        for s in scenes]).astype(np.float64)
     std = x.std(0)
     return x.mean(0).tolist(), np.where(std > 1e-6, std, 1.0).tolist()
 

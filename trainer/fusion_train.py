@@ -34,13 +34,24 @@ from fusion.fusion_inputs import VARIANTS
 from trainer.checkpoint import load_checkpoint, save_checkpoint
 from trainer.confidence_cnn import IN_CHANNELS, ConfidenceCNN
 from trainer.errors import TrainerInputError
-from trainer.fusion_data import FusionScene, channel_stats, load_shard_scenes, normalise, random_patch, shard_keys
+from trainer.fusion_data import (
+    DISP_REFS,
+    FusionScene,
+    channel_stats,
+    disparity_reference,
+    load_shard_scenes,
+    normalise,
+    random_patch,
+    relative_input,
+    shard_keys,
+)
 from trainer.sources import split_fraction
 
 log = logging.getLogger(__name__)
 
 OPTIMIZERS = ("adadelta", "adam")
-RESUME_FIXED_ARGS = ("variant", "seed", "val_fraction", "split_seed", "densify")
+RESUME_FIXED_ARGS = {"variant": None, "seed": None, "val_fraction": None, "split_seed": None, "densify": None,
+                     "disp_ref": "none"}  # name -> value assumed for checkpoints made before the option
 
 
 def add_fusion_args(p: argparse.ArgumentParser) -> None:
@@ -57,6 +68,8 @@ def add_fusion_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rotate-deg", type=float, default=5.0)
     p.add_argument("--no-flips", action="store_true")
     p.add_argument("--densify", choices=DENSIFY_METHODS, default="normconv", help="how sparse ToF/LiDAR is filled")
+    p.add_argument("--disp-ref", choices=DISP_REFS, default="none",
+                   help="median: feed disparities relative to the scene's ToF/LiDAR median (scale-free across scenes)")
     p.add_argument("--stereo-dir", default=None, help="external stereo disparity per sample: DIR/KEY.{exr,pfm,npy,...}")
     p.add_argument("--other-dir", default=None, help="external ToF/LiDAR disparity (e.g. completed LiDAR) per sample")
     p.add_argument("--val-every", type=int, default=0, help="validate every N steps (0: only at the end)")
@@ -101,10 +114,11 @@ def build_optimizer(args: argparse.Namespace, model: torch.nn.Module) -> torch.o
     return torch.optim.Adam(model.parameters(), lr=args.lr)
 
 
-def sample_config(variant: str, mean: Sequence[float], std: Sequence[float], densify: str) -> dict[str, Any]:
+def sample_config(variant: str, mean: Sequence[float], std: Sequence[float], densify: str,
+                  disp_ref: str = "none") -> dict[str, Any]:
     """What ``fuse`` and ``fusion-eval`` need to rebuild the inputs exactly as in training."""
     return {"task": "fusion", "variant": variant, "in_channels": IN_CHANNELS[variant], "channels": list(VARIANTS[variant]),
-            "mean": list(mean), "std": list(std), "densify": densify}
+            "mean": list(mean), "std": list(std), "densify": densify, "disp_ref": disp_ref}
 
 
 def make_batch(scenes: Sequence[FusionScene], args: argparse.Namespace, step: int, mean, std
@@ -114,9 +128,11 @@ def make_batch(scenes: Sequence[FusionScene], args: argparse.Namespace, step: in
     size = min(args.patch, *(min(s.x.shape[:2]) for s in scenes))
     xs, ts = [], []
     for _ in range(args.batch_size):
-        x, gt = random_patch(scenes[rng.integers(len(scenes))], size, rng, args.rotate_deg, not args.no_flips)
+        scene = scenes[rng.integers(len(scenes))]
+        x, gt = random_patch(scene, size, rng, args.rotate_deg, not args.no_flips)
         ts.append(np.stack([confidence_target(x[..., 0], gt), confidence_target(x[..., 1], gt)]))
-        xs.append(normalise(x, mean, std).transpose(2, 0, 1))
+        ref = disparity_reference(scene.x, args.disp_ref)  # the whole scene's, as at inference
+        xs.append(normalise(relative_input(x, ref), mean, std).transpose(2, 0, 1))
     return torch.from_numpy(np.stack(xs)), torch.from_numpy(np.stack(ts))
 
 
@@ -139,9 +155,11 @@ def train_step(run: FusionRun, step: int) -> float:
 
 
 @torch.no_grad()
-def predict_confidence(model: ConfidenceCNN, x: np.ndarray, mean, std, device: torch.device) -> np.ndarray:
+def predict_confidence(model: ConfidenceCNN, x: np.ndarray, mean, std, device: torch.device,
+                       disp_ref: str = "none") -> np.ndarray:
     """(H,W,C) raw inputs -> (2,H,W) confidences (stereo, other) of one whole scene."""
     model.eval()
+    x = relative_input(x, disparity_reference(x, disp_ref))
     inp = torch.from_numpy(normalise(x, mean, std).transpose(2, 0, 1)[None]).to(device)
     return model(inp)[0].float().cpu().numpy()
 
@@ -150,7 +168,7 @@ def validate(run: FusionRun) -> dict[str, float]:
     """Held-out confidence MSE and the fused-max MAE / input MAEs, averaged over scenes."""
     losses, mae = [], {"stereo": [], "other": [], "fused_max": []}
     for s in run.val:
-        c = predict_confidence(run.model, s.x, run.mean, run.std, run.device)
+        c = predict_confidence(run.model, s.x, run.mean, run.std, run.device, run.args.disp_ref)
         t = np.stack([confidence_target(s.x[..., 0], s.gt), confidence_target(s.x[..., 1], s.gt)])
         ok = np.isfinite(t)
         losses.append(float(np.mean((c[ok] - t[ok]) ** 2)))
@@ -164,13 +182,14 @@ def validate(run: FusionRun) -> dict[str, float]:
 
 def checkpoint_payload(run: FusionRun, step: int, best: dict[str, Any], val_keys: list[str]) -> dict[str, Any]:
     return {"model": run.model.state_dict(), "optimizer": run.optimizer.state_dict(), "step": step,
-            "args": vars(run.args), "sample_config": sample_config(run.args.variant, run.mean, run.std, run.args.densify),
+            "args": vars(run.args), "sample_config": sample_config(run.args.variant, run.mean, run.std, run.args.densify,
+                                                           run.args.disp_ref),
             "best": best, "val_keys": val_keys, "train_keys": [s.key for s in run.train]}
 
 
 def check_resume(args: argparse.Namespace, ckpt: dict[str, Any]) -> None:
     old = ckpt["args"]
-    changed = [k for k in RESUME_FIXED_ARGS if old.get(k) != getattr(args, k)]
+    changed = [k for k, before in RESUME_FIXED_ARGS.items() if old.get(k, before) != getattr(args, k)]
     if changed:
         raise TrainerInputError(f"--resume {args.resume}: {', '.join(changed)} differ from the checkpoint's")
     if ckpt.get("sample_config", {}).get("task") != "fusion":
@@ -198,7 +217,7 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
                 progress=progress)
     train = load_shard_scenes(args.data, keys=train_keys, **load)
     val = load_shard_scenes(args.data, keys=val_keys, **load) if val_keys else []
-    mean, std = channel_stats(train) if ckpt is None else (ckpt["sample_config"]["mean"], ckpt["sample_config"]["std"])
+    mean, std = channel_stats(train, args.disp_ref) if ckpt is None else (ckpt["sample_config"]["mean"], ckpt["sample_config"]["std"])
     torch.manual_seed(args.seed)
     model = ConfidenceCNN(IN_CHANNELS[args.variant]).to(device)
     optimizer = build_optimizer(args, model)

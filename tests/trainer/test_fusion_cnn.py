@@ -153,6 +153,36 @@ def test_a_few_training_steps_reduce_the_loss_then_eval_and_fuse(fusion_shards, 
     assert "nope.npy" in capsys.readouterr().err
 
 
+def test_median_disparity_reference_makes_the_input_shift_free(fusion_shards, tmp_path, capsys):
+    from trainer.fusion_data import channel_stats, disparity_reference, relative_input
+    from trainer.fusion_train import predict_confidence
+
+    scene = load_shard_scenes(fusion_shards, "lidar", progress=False)[0]
+    shifted = scene.x.copy()
+    shifted[..., :2] += 17.0  # the same scene 17 px nearer in disparity
+    ref, ref_shifted = disparity_reference(scene.x, "median"), disparity_reference(shifted, "median")
+    assert ref_shifted == pytest.approx(ref + 17.0, abs=1e-4)
+    np.testing.assert_allclose(relative_input(shifted, ref_shifted), relative_input(scene.x, ref), atol=1e-4)
+    assert disparity_reference(scene.x, "none") == 0.0 and relative_input(scene.x, 0.0) is scene.x
+    mean, std = channel_stats([scene], "median")
+    assert abs(mean[1]) < 1.0 < abs(channel_stats([scene])[0][1])  # centred on the scene's own level
+    torch.manual_seed(0)
+    model = ConfidenceCNN(3)
+    a = predict_confidence(model, scene.x, mean, std, torch.device("cpu"), "median")
+    b = predict_confidence(model, shifted, mean, std, torch.device("cpu"), "median")
+    np.testing.assert_allclose(a, b, atol=1e-4)
+    assert not np.allclose(predict_confidence(model, shifted, mean, std, torch.device("cpu")), a, atol=1e-3)
+
+    out = tmp_path / "run"
+    assert cli_main(["fusion", "--data", str(fusion_shards), "--variant", "lidar", "--disp-ref", "median",
+                     "--patch", "16", "-b", "2", "--steps", "2", "--no-progress", "--out", str(out)]) == 0
+    ckpt = torch.load(out / "last.pt", weights_only=False)
+    assert ckpt["sample_config"]["disp_ref"] == "median"
+    assert cli_main(["fusion", "--data", str(fusion_shards), "--variant", "lidar", "--patch", "16", "-b", "2",
+                     "--steps", "3", "--no-progress", "--out", str(out), "--resume", str(out / "last.pt")]) == 2
+    assert "disp_ref differ" in capsys.readouterr().err  # resuming without the option is refused
+
+
 REAL_CONES = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real" / "stereo" / "middlebury2003_cones"
 
 
