@@ -34,6 +34,7 @@ from fusion.fusion_inputs import VARIANTS
 from trainer.checkpoint import load_checkpoint, save_checkpoint
 from trainer.confidence_cnn import IN_CHANNELS, ConfidenceCNN
 from trainer.errors import TrainerInputError
+from trainer.fusion_augment import corrupt_stereo
 from trainer.fusion_data import (
     DISP_REFS,
     FusionScene,
@@ -51,7 +52,7 @@ log = logging.getLogger(__name__)
 
 OPTIMIZERS = ("adadelta", "adam")
 RESUME_FIXED_ARGS = {"variant": None, "seed": None, "val_fraction": None, "split_seed": None, "densify": None,
-                     "disp_ref": "none"}  # name -> value assumed for checkpoints made before the option
+                     "disp_ref": "none", "stereo_failures": 0.0}  # name -> value assumed for checkpoints made before the option
 
 
 def add_fusion_args(p: argparse.ArgumentParser) -> None:
@@ -70,6 +71,9 @@ def add_fusion_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--densify", choices=DENSIFY_METHODS, default="normconv", help="how sparse ToF/LiDAR is filled")
     p.add_argument("--disp-ref", choices=DISP_REFS, default="none",
                    help="median: feed disparities relative to the scene's ToF/LiDAR median (scale-free across scenes)")
+    p.add_argument("--stereo-failures", type=float, default=0.0, metavar="P",
+                   help="lidar variant: probability per patch of SGBM region failures pasted into the stereo "
+                        "channel (offset / flat fill / speckle; trainer.fusion_augment); 0 = off (thesis)")
     p.add_argument("--stereo-dir", default=None, help="external stereo disparity per sample: DIR/KEY.{exr,pfm,npy,...}")
     p.add_argument("--other-dir", default=None, help="external ToF/LiDAR disparity (e.g. completed LiDAR) per sample")
     p.add_argument("--val-every", type=int, default=0, help="validate every N steps (0: only at the end)")
@@ -130,6 +134,8 @@ def make_batch(scenes: Sequence[FusionScene], args: argparse.Namespace, step: in
     for _ in range(args.batch_size):
         scene = scenes[rng.integers(len(scenes))]
         x, gt = random_patch(scene, size, rng, args.rotate_deg, not args.no_flips)
+        if args.stereo_failures > 0:
+            x, _ = corrupt_stereo(x, rng, args.stereo_failures)
         ts.append(np.stack([confidence_target(x[..., 0], gt), confidence_target(x[..., 1], gt)]))
         ref = disparity_reference(scene.x, args.disp_ref)  # the whole scene's, as at inference
         xs.append(normalise(relative_input(x, ref), mean, std).transpose(2, 0, 1))
@@ -203,6 +209,11 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
         torch.set_num_threads(args.threads)
     if args.batch_size < 1 or args.patch < 8 or args.steps < 0:
         raise TrainerInputError("--batch-size must be >= 1, --patch >= 8 and --steps >= 0")
+    if not 0.0 <= args.stereo_failures <= 1.0:
+        raise TrainerInputError(f"--stereo-failures must be a probability in [0, 1], got {args.stereo_failures}")
+    if args.stereo_failures > 0 and args.variant != "lidar":
+        raise TrainerInputError("--stereo-failures needs --variant lidar: the ToF variant's grey difference is "
+                                "warped by the stereo disparity, which a pasted failure would contradict")
     device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
     if device.type == "cuda" and not torch.cuda.is_available():
         raise TrainerInputError("--device cuda but CUDA is not available")
