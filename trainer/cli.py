@@ -1,4 +1,4 @@
-"""``cracktrain``: train, evaluate, predict, compare sim-to-real, fuse depth, fuse images, split, benchmark.
+"""``cracktrain``: train, evaluate, predict, compare sim-to-real, adapt BN to a site, fuse depth, fuse images, split, benchmark.
 
 Every subcommand exits non-zero with a one-line reason on bad input
 (missing folder, no images, unreadable file, bad checkpoint).
@@ -16,6 +16,7 @@ from trainer.errors import TrainerInputError
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from trainer.adapt_bn import add_adapt_bn_args
     from trainer.bench import add_bench_args
     from trainer.evaluate import add_eval_args
     from trainer.fuse_images import add_fuse_args as add_fuse_images_args
@@ -36,6 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
         ("predict", add_predict_args, "masks, overlays and crack length/width (px or metres) for real photos"),
         ("sim2real", add_sim2real_args,
          "synthetic (+ adaptation) vs real vs mixed vs fine-tune, or the label-efficiency curve, on real test data"),
+        ("adapt-bn", add_adapt_bn_args,
+         "move a trained model's BatchNorm statistics to a folder of unlabeled site photos (AdaBN)"),
         ("fusion", add_fusion_args, "train the ToF/LiDAR-stereo confidence CNN (thesis: Adadelta 0.01, batch 32, 128 px)"),
         ("fuse", add_fuse_args, "fuse a stereo and a ToF/LiDAR disparity file with a trained confidence CNN"),
         ("fusion-eval", add_fusion_eval_args, "thesis-style table: stereo, ToF/LiDAR, fused max/weighted, + BM3D"),
@@ -80,6 +83,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             report = Path(res["out"]) / "curve.md" if args.curve else Path(args.out) / "sim2real.md"
             print(report.read_text())
             print(f"wrote {report.parent}")
+        elif args.command == "adapt-bn":
+            from trainer.adapt_bn import run_adapt_bn
+
+            r = run_adapt_bn(args)
+            print(f"BN statistics of {r['source']} re-estimated on {r['batches']} batches of {r['crop']}-px crops "
+                  f"from {r['photos']} photos in {r['target']}; wrote {args.out}")
         elif args.command == "fusion":
             from trainer.fusion_train import main as fusion_main
 

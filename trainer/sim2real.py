@@ -7,6 +7,8 @@ real test set, P/R/F1/IoU at its best-F1 threshold and F1 at 0.5):
 - ``synthetic+fourier`` / ``+reinhard`` / ``+histogram`` / ``synthetic+adapt`` (all three
   drawn per sample): synthetic shards adapted toward unlabeled target photos
   (``--target``; with no folder, the *images* of the real training split, labels unused);
+- ``synthetic+bn``: the ``synthetic`` row's model with its BatchNorm statistics re-estimated on
+  the unlabeled target photos (AdaBN, ``trainer.target_bn``): same weights, no extra steps;
 - ``real``: the real training split only;
 - ``mixed``: synthetic + real (real repeated N times, thesis rule);
 - ``finetune``: synthetic pretraining for ``--finetune-fraction`` of the budget (adapted
@@ -34,6 +36,7 @@ from typing import Any
 
 import torch
 
+from trainer.adapt_bn import adapt_checkpoint
 from trainer.builders import add_data_args, eval_loader, real_folder, sample_config_from_args
 from trainer.checkpoint import load_checkpoint
 from trainer.curve import (
@@ -60,6 +63,8 @@ log = logging.getLogger(__name__)
 BASE_RUNS = ("synthetic", "real", "mixed", "finetune")
 ADAPT_RUNS = {"synthetic+fourier": "fourier", "synthetic+reinhard": "reinhard",
               "synthetic+histogram": "histogram", "synthetic+adapt": "fourier,reinhard,histogram"}
+BN_RUN = "synthetic+bn"  # target BN on the synthetic row's model
+TARGET_RUNS = (*ADAPT_RUNS, BN_RUN)  # rows that need --target
 
 
 def add_sim2real_args(p: argparse.ArgumentParser) -> None:
@@ -77,7 +82,7 @@ def add_sim2real_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", "-j", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--runs", default=None,
-                   help=f"comma list of {', '.join(BASE_RUNS + tuple(ADAPT_RUNS))} "
+                   help=f"comma list of {', '.join(BASE_RUNS + TARGET_RUNS)} "
                         "(default: the four base rows, plus the adaptation rows with --target)")
     p.add_argument("--target", nargs="?", const="", default=None, metavar="FOLDER",
                    help="adapt synthetic RGB toward these unlabeled photos; no FOLDER: the real training split's images")
@@ -111,6 +116,7 @@ def seg_args(args: argparse.Namespace, out: Path, data: str | None, real: str | 
     ns.data, ns.real, ns.real_stems, ns.out = data, real, stems, str(out)
     ns.val_fraction, ns.val_data, ns.val_real, ns.resume, ns.test_only = 0.0, None, None, None, False
     ns.adapt_target, ns.adapt_targets, ns.init = None, None, None
+    ns.bn_target, ns.bn_targets = None, None
     for k, v in overrides.items():
         setattr(ns, k, v)
     return ns
@@ -159,12 +165,12 @@ def _device(args: argparse.Namespace) -> torch.device:
 
 def wanted_runs(args: argparse.Namespace) -> list[str]:
     if args.runs is None:
-        return list(BASE_RUNS) + (list(ADAPT_RUNS) if args.target is not None else [])
+        return list(BASE_RUNS) + (list(TARGET_RUNS) if args.target is not None else [])
     runs = [r.strip() for r in args.runs.split(",") if r.strip()]
     for r in runs:
-        if r not in BASE_RUNS and r not in ADAPT_RUNS:
-            raise TrainerInputError(f"--runs: unknown run {r!r} ({', '.join(BASE_RUNS + tuple(ADAPT_RUNS))})")
-        if r in ADAPT_RUNS and args.target is None:
+        if r not in BASE_RUNS and r not in TARGET_RUNS:
+            raise TrainerInputError(f"--runs: unknown run {r!r} ({', '.join(BASE_RUNS + TARGET_RUNS)})")
+        if r in TARGET_RUNS and args.target is None:
             raise TrainerInputError(f"--runs {r} needs --target (a folder, or none for the real training images)")
     return runs
 
@@ -185,6 +191,8 @@ def run_row(name: str, args: argparse.Namespace, out: Path, train_stems: list[st
         return train_and_score(ns, test, args, device)
     if name == "synthetic":
         return train_and_score(seg_args(args, out / name, args.synthetic, None, None), test, args, device)
+    if name == BN_RUN:
+        return target_bn_row(args, out, targets, test, device)
     # finetune: pretrain on synthetic (adapted when targets exist), then the rest of the budget on real
     if not 0.0 < args.finetune_fraction < 1.0:
         raise TrainerInputError(f"--finetune-fraction must be in (0, 1), got {args.finetune_fraction}")
@@ -203,6 +211,23 @@ def run_row(name: str, args: argparse.Namespace, out: Path, train_stems: list[st
     return res
 
 
+def target_bn_row(args: argparse.Namespace, out: Path, targets: tuple[str, ...] | None, test: RealFolder,
+                  device: torch.device) -> dict[str, Any]:
+    """The ``synthetic`` row's model (trained here unless that row already finished) with BN statistics
+    from the target photos: what target BN alone is worth, on identical weights."""
+    assert targets is not None
+    base = seg_args(args, out / "synthetic", args.synthetic, None, None)
+    info = train_or_reuse(base)
+    t0 = time.perf_counter()
+    dst = out / BN_RUN / "checkpoint.pt"
+    record = adapt_checkpoint(out / "synthetic" / "checkpoint.pt", dst, targets, device,
+                              target=describe_target(args, targets) or "", batch_size=args.batch_size,
+                              crop=args.crop, workers=args.workers, seed=args.seed)
+    s = score(dst, test, args, device)
+    return {"steps": info["step"], "train_seconds": round(info["seconds"] + time.perf_counter() - t0, 1),
+            "best": s["best"], "at_0.5": s["at_threshold"], "target_bn": record}
+
+
 def run_sim2real(args: argparse.Namespace) -> dict[str, Any]:
     if args.curve:
         return run_curve(args)
@@ -211,7 +236,7 @@ def run_sim2real(args: argparse.Namespace) -> dict[str, Any]:
     train_stems, test_root, test_stems = real_split_for(args)
     test = real_folder(args, test_root, test_stems)
     runs = wanted_runs(args)
-    targets = adaptation_targets(args, train_stems) if any(r in ADAPT_RUNS or r == "finetune" for r in runs) else None
+    targets = adaptation_targets(args, train_stems) if any(r in TARGET_RUNS or r == "finetune" for r in runs) else None
     device = _device(args)
     results: dict[str, Any] = {}
     n_real = len(train_stems) if train_stems is not None else len(real_folder(args, args.real))

@@ -52,6 +52,7 @@ from trainer.metrics import ConfusionHistogram
 from trainer.models import ARCHS, build_model
 from trainer.site_adapt import SiteAdaptation, parse_band, targets_from_folder
 from trainer.stream import SegStream, dist_info, mix_repeat
+from trainer.target_bn import DEFAULT_BATCHES, adapt_bn_to_photos
 
 log = logging.getLogger(__name__)
 
@@ -102,6 +103,10 @@ def add_seg_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--adapt-methods", default="fourier,reinhard,histogram", help="methods drawn uniformly per sample")
     g.add_argument("--adapt-band", default="0.005,0.05", help="Fourier band MIN,MAX (fraction of min(H, W))")
     g.add_argument("--adapt-prob", type=float, default=1.0, help="chance that a synthetic sample is adapted")
+    g = p.add_argument_group("target BatchNorm (AdaBN): BN statistics from unlabeled site photos after training")
+    g.add_argument("--bn-target", default=None, metavar="FOLDER",
+                   help="re-estimate BN statistics on these unlabeled photos at the end (weights unchanged)")
+    g.add_argument("--bn-target-batches", type=int, default=DEFAULT_BATCHES, help="batches of photo crops averaged")
     p.add_argument("--test-only", action="store_true", help="only validate the --resume checkpoint")
     p.add_argument("--no-progress", action="store_true")
     add_data_args(p)
@@ -117,6 +122,7 @@ class TrainState:
     batch_in_epoch: int = 0
     step: int = 0
     best: dict[str, Any] = field(default_factory=lambda: {"f1": -1.0})
+    target_bn: dict[str, Any] | None = None  # set once BN statistics were moved to site photos
 
 
 class _Logger:
@@ -280,6 +286,30 @@ def finish_precise_bn(run: Run, train_ds: SegStream, state: TrainState) -> None:
     used = precise_bn(run.model, loader, run.device, n)
     if run.main_proc:
         log.info("precise BN: BatchNorm statistics recomputed with the final weights on %d training batches", used)
+
+
+def bn_target_photos(args: argparse.Namespace) -> tuple[str, ...] | None:
+    """Photos for target BN: ``args.bn_targets`` (paths set by sim2real) or ``--bn-target FOLDER``."""
+    photos = getattr(args, "bn_targets", None)
+    if not photos and getattr(args, "bn_target", None):
+        photos = targets_from_folder(args.bn_target)
+    return tuple(photos) if photos else None
+
+
+def finish_target_bn(run: Run, state: TrainState) -> None:
+    """BN statistics from the unlabeled site photos (``trainer.target_bn``), after precise BN; the record
+    goes into the final checkpoint (``target_bn``)."""
+    photos = bn_target_photos(run.args)
+    if photos is None:
+        return
+    used = adapt_bn_to_photos(run.bare, photos, run.cfg, run.device, crop=run.cfg.crop,
+                              batches=run.args.bn_target_batches, batch_size=run.args.batch_size,
+                              workers=run.args.workers, seed=run.args.seed)
+    state.target_bn = {"target": run.args.bn_target or "photos given by sim2real", "photos": len(photos),
+                       "batches": used, "crop": run.cfg.crop}
+    run.model.train()
+    if run.main_proc:
+        log.info("target BN: BatchNorm statistics re-estimated on %d batches of %d unlabeled photos", used, len(photos))
 
 
 def build_network(args: argparse.Namespace, in_channels: int, device: torch.device,
@@ -469,8 +499,10 @@ def fit(run: Run, train_ds: SegStream, val_ds: SegStream | None, state: TrainSta
             save_checkpoint(run.out / "checkpoint.pt", checkpoint_payload(run, state))
     bar.close()
     finish_precise_bn(run, train_ds, state)
+    finish_target_bn(run, state)
     if run.main_proc:
-        save_checkpoint(run.out / "checkpoint.pt", checkpoint_payload(run, state) | {"finished": True})
+        final = {"finished": True} | ({"target_bn": state.target_bn} if state.target_bn else {})
+        save_checkpoint(run.out / "checkpoint.pt", checkpoint_payload(run, state) | final)
         if val_ds is not None and state.best.get("f1", -1) < 0:
             record_validation(run, state, validate(run, val_ds, state))
 
@@ -490,6 +522,8 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
     args.mask_member = mask_member(args)  # stored resolved in the checkpoint
     ckpt = load_resume_checkpoint(args)
     train_ds, val_ds = build_datasets(args)
+    if bn_target_photos(args) and train_ds.cfg.channels != "rgb":  # checked before any step is trained
+        raise TrainerInputError(f"--bn-target needs an RGB model (--depth none); photos have no {args.depth} depth")
     model, bare = build_network(args, train_ds.cfg.in_channels, device, distributed)
     amp = device.type == "cuda" and not args.no_amp
     spe = train_ds.steps_per_epoch(args.workers)
