@@ -78,6 +78,8 @@ def add_sim2real_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch-size", "-b", type=int, default=4)
     p.add_argument("--crop", type=int, default=192)
     p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument("--lr-scheduler", choices=("none", "poly", "cosine"), default="none",
+                   help="learning-rate schedule of every training (a fine-tune's two phases each run their own)")
     p.add_argument("--loss", default="bce")
     p.add_argument("--workers", "-j", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
@@ -288,7 +290,9 @@ def rows_markdown(args: argparse.Namespace, table: dict[str, Any], test_root: st
 # or after a kill) only when these match what curve_settings.json recorded.
 CURVE_SETTINGS = ("synthetic", "real", "real_test", "real_test_fraction", "split_seed", "seed", "arch", "loss", "lr",
                   "batch_size", "crop", "curve_steps", "pretrain_steps", "max_steps", "depth", "depth_norm",
-                  "mask_member", "precise_bn", "pretrained")
+                  "mask_member", "precise_bn", "pretrained", "lr_scheduler")
+# Settings added after curves were first recorded: a record without them was made with these values.
+CURVE_SETTING_DEFAULTS = {"lr_scheduler": "none"}
 
 
 def check_curve_settings(args: argparse.Namespace, out: Path, targets: tuple[str, ...] | None) -> None:
@@ -302,6 +306,7 @@ def check_curve_settings(args: argparse.Namespace, out: Path, targets: tuple[str
         path.write_text(json.dumps(now, indent=2))
         return
     before = json.loads(path.read_text())
+    before = CURVE_SETTING_DEFAULTS | before
     changed = [f"{k} {before.get(k)!r} -> {v!r}" for k, v in now.items() if before.get(k) != v]
     if changed:
         raise TrainerInputError(f"{out} holds a curve made with other settings ({'; '.join(changed)}); "

@@ -101,3 +101,25 @@ def test_stream_adapts_synthetic_rgb_only(data):
         assert torch.equal(plain[k]["mask"], adapted[k]["mask"])
         same = torch.equal(plain[k]["image"], adapted[k]["image"])
         assert same == (k in real.keys), k  # real photos untouched, every synthetic one changed
+
+
+def test_lr_scheduler_reaches_every_row_and_old_curves_continue(data, tmp_path):
+    out = tmp_path / "s"
+    assert main(["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]),
+                 "--real-test-fraction", "0.25", "--max-steps", "2", "--lr-scheduler", "cosine",
+                 "--runs", "synthetic,finetune", "--out", str(out), *COMMON]) == 0
+    for row in ("synthetic", "finetune_pretrain", "finetune"):
+        ckpt = load_checkpoint(out / row / "checkpoint.pt")
+        assert ckpt["args"]["lr_scheduler"] == "cosine"
+        assert ckpt["optimizer"]["param_groups"][0]["lr"] < 1e-3  # annealed, not the constant 1e-3
+    # a curve recorded before --lr-scheduler existed continues with the default, and refuses another value
+    curve = ["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]), "--real-test-fraction",
+             "0.25", "--curve", "0,2", "--repeats", "1", "--curve-steps", "1", "--pretrain-steps", "1",
+             "--out", str(tmp_path / "c"), *COMMON]
+    assert main(curve) == 0
+    settings = tmp_path / "c" / "curve" / "curve_settings.json"
+    old = json.loads(settings.read_text())
+    del old["lr_scheduler"]
+    settings.write_text(json.dumps(old))
+    assert main(curve) == 0
+    assert main([*curve, "--lr-scheduler", "poly"]) == 2
