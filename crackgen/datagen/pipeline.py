@@ -31,7 +31,7 @@ import numpy as np
 import crackgen
 from crackgen.config.recipe import Recipe
 from crackgen.config.spec import SampleSpec, make_spec, pixel_footprint_m
-from crackgen.datagen.heap import fix_mmap_threshold, release_free_heap
+from crackgen.datagen.heap import release_free_heap
 from crackgen.errors import CrackgenError
 from crackgen.postrender.stage import adapt_members, camera_effects_members
 from crackgen.postrender.targets import TargetPhotos
@@ -105,7 +105,6 @@ class SampleProducer:
         self.keep_linear = bool(keep_linear)  # keep the scene-linear render on the Sample (crackgen bench --sweep)
         self._scene = None
         self._targets: TargetPhotos | None = None
-        fix_mmap_threshold()  # big temporaries go back to the OS when freed (see heap)
 
     @property
     def targets(self) -> TargetPhotos | None:
