@@ -12,8 +12,8 @@ real test set, P/R/F1/IoU at its best-F1 threshold and F1 at 0.5):
 - ``real``: the real training split only;
 - ``mixed``: synthetic + real (real repeated N times, thesis rule);
 - ``finetune``: synthetic pretraining for ``--finetune-fraction`` of the budget (adapted
-  when ``--target`` is given), then fine-tuning on the real split for the rest: the same
-  total step budget as every other row.
+  when ``--target`` is given, unless ``--plain-pretrain``), then fine-tuning on the real split
+  for the rest (at ``--finetune-lr``): the same total step budget as every other row.
 
 ``--curve 0,10,30,...`` instead runs the label-efficiency curve (``trainer.curve``):
 for each N and repeat, real-only and synthetic -> fine-tune on the same N photos with the
@@ -90,6 +90,10 @@ def add_sim2real_args(p: argparse.ArgumentParser) -> None:
                    help="adapt synthetic RGB toward these unlabeled photos; no FOLDER: the real training split's images")
     p.add_argument("--adapt-band", default="0.005,0.05", help="Fourier band MIN,MAX (fraction of min(H, W))")
     p.add_argument("--adapt-prob", type=float, default=1.0, help="chance that a synthetic sample is adapted")
+    p.add_argument("--finetune-lr", type=float, default=None,
+                   help="finetune row: learning rate of the fine-tune phase (default --lr)")
+    p.add_argument("--plain-pretrain", action="store_true",
+                   help="finetune row: pretrain on the renders as they are, even with --target (default: adapted)")
     p.add_argument("--finetune-fraction", type=float, default=0.5,
                    help="finetune row: share of --max-steps spent on synthetic pretraining")
     p.add_argument("--curve", default=None, metavar="N,N,...", help="run the label-efficiency curve at these photo counts")
@@ -199,15 +203,19 @@ def run_row(name: str, args: argparse.Namespace, out: Path, train_stems: list[st
     if not 0.0 < args.finetune_fraction < 1.0:
         raise TrainerInputError(f"--finetune-fraction must be in (0, 1), got {args.finetune_fraction}")
     pre_steps = max(1, round(args.max_steps * args.finetune_fraction))
+    if args.finetune_lr is not None and not args.finetune_lr > 0:
+        raise TrainerInputError(f"--finetune-lr must be > 0, got {args.finetune_lr}")
+    pre_targets = None if args.plain_pretrain else targets
     pre = seg_args(args, out / "finetune_pretrain", args.synthetic, None, None, max_steps=pre_steps,
-                   adapt_targets=targets)
+                   adapt_targets=pre_targets)
     t0 = time.perf_counter()
     train_seg(pre)
     ft = seg_args(args, out / name, None, args.real, stems, max_steps=args.max_steps - pre_steps,
-                  init=str(out / "finetune_pretrain" / "checkpoint.pt"))
+                  init=str(out / "finetune_pretrain" / "checkpoint.pt"), lr=args.finetune_lr or args.lr)
     res = train_and_score(ft, test, args, device)
     res["pretrain_steps"] = pre_steps
-    res["pretrain_adapted"] = targets is not None
+    res["pretrain_adapted"] = pre_targets is not None
+    res["finetune_lr"] = args.finetune_lr or args.lr
     res["train_seconds"] = round(time.perf_counter() - t0, 1)
     res["steps"] = args.max_steps
     return res

@@ -123,3 +123,19 @@ def test_lr_scheduler_reaches_every_row_and_old_curves_continue(data, tmp_path):
     settings.write_text(json.dumps(old))
     assert main(curve) == 0
     assert main([*curve, "--lr-scheduler", "poly"]) == 2
+
+
+def test_finetune_lr_and_plain_pretraining(data, tmp_path, capsys):
+    out = tmp_path / "f"
+    assert main(["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]),
+                 "--real-test-fraction", "0.25", "--target", "--max-steps", "4", "--runs", "finetune",
+                 "--finetune-lr", "3e-4", "--plain-pretrain", "--out", str(out), *COMMON]) == 0
+    ft = json.loads((out / "sim2real.json").read_text())["runs"]["finetune"]
+    assert ft["pretrain_adapted"] is False and ft["finetune_lr"] == 3e-4
+    assert load_checkpoint(out / "finetune_pretrain" / "checkpoint.pt")["args"]["lr"] == 1e-3
+    assert load_checkpoint(out / "finetune" / "checkpoint.pt")["args"]["lr"] == 3e-4
+    assert load_checkpoint(out / "finetune_pretrain" / "checkpoint.pt")["args"]["adapt_targets"] is None
+    assert main(["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]),
+                 "--real-test-fraction", "0.25", "--runs", "finetune", "--finetune-lr", "0",
+                 "--out", str(out), *COMMON]) == 2
+    assert "--finetune-lr must be > 0" in capsys.readouterr().err
