@@ -12,6 +12,12 @@ the sparse ToF/LiDAR by ``fusion.densify`` (normalised convolution by default),
 unless the caller passes maps that are already dense (an external stereo
 network, a depth-completion network). The two candidates are what the fusion
 rules pick from, so the CNN scores exactly the values that get fused.
+
+``stereo_valid`` keeps where the stereo map had a measured value before its
+holes were filled: a filled hole is an interpolation across an occlusion or a
+matching failure, not a measurement, and on real scenes it is where stereo is
+worst (Middlebury Cones: 22 % of the pixels, 4.4 px filled-stereo error against
+0.6 px for the LiDAR), so the fusion rules can refuse it (``fuse_scene``).
 """
 from __future__ import annotations
 
@@ -37,6 +43,7 @@ class FusionInputs:
 
     variant: str
     x: np.ndarray  # (H,W,C) raw (unnormalised) channels in VARIANTS[variant] order
+    stereo_valid: np.ndarray  # (H,W) bool: the stereo input had a value here (not a filled hole)
 
     @property
     def stereo(self) -> np.ndarray:
@@ -69,7 +76,8 @@ def build_inputs(
     _shape_check(shape, disp_other=disp_other, left=left, right=right, amplitude=amplitude)
     if not valid_values(disp_other).any():
         raise FusionInputError(f"the {OTHER_NAME[variant]} disparity has no valid pixel")
-    ds = interpolate_sparse(disp_stereo, densify) if valid_values(disp_stereo).any() else np.full(shape, -1, np.float32)
+    stereo_valid = valid_values(disp_stereo)
+    ds = interpolate_sparse(disp_stereo, densify) if stereo_valid.any() else np.full(shape, -1, np.float32)
     do = interpolate_sparse(disp_other, densify)
     if variant == "tof":
         if amplitude is None:
@@ -80,4 +88,4 @@ def build_inputs(
     else:
         lr = left_right_difference(left, right, do)
         x = np.stack([ds, do, lr], axis=-1)
-    return FusionInputs(variant, x.astype(np.float32))
+    return FusionInputs(variant, x.astype(np.float32), stereo_valid)

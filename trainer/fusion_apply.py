@@ -51,20 +51,41 @@ def post_filter_from_args(args: argparse.Namespace) -> PostFilter | None:
         raise TrainerInputError(str(exc)) from None
 
 
+STEREO_HOLES = ("other", "cnn")
+
+
 def fuse_scene(model: ConfidenceCNN, cfg: dict[str, Any], x: np.ndarray, device: torch.device,
-               post: PostFilter | None = None) -> dict[str, np.ndarray]:
-    """Raw input stack (H,W,C) -> confidences and fused maps (max and weighted rules)."""
+               post: PostFilter | None = None, stereo_valid: np.ndarray | None = None,
+               stereo_holes: str = "other") -> dict[str, np.ndarray]:
+    """Raw input stack (H,W,C) -> confidences and fused maps (max and weighted rules).
+
+    ``stereo_holes="other"``: where the stereo had no measurement (``stereo_valid``
+    False, a hole filled for the CNN's input) the rules take the ToF/LiDAR value,
+    as they do for any candidate without a value; ``"cnn"``: the filled value
+    competes on its confidence like a measured one (the thesis's dense input).
+    """
+    if stereo_holes not in STEREO_HOLES:
+        raise TrainerInputError(f"--stereo-holes must be one of {', '.join(STEREO_HOLES)}, got {stereo_holes!r}")
     x = x.copy()
     if post is not None and post.stage == "before":
         x[..., 0], x[..., 1] = post.apply(x[..., 0]), post.apply(x[..., 1])
     c = predict_confidence(model, x, cfg["mean"], cfg["std"], device, cfg.get("disp_ref", "none"))
+    ds = x[..., 0]
+    if stereo_holes == "other" and stereo_valid is not None:
+        ds = np.where(stereo_valid, ds, np.float32(-1.0))
     out = {"conf_stereo": c[0], "conf_other": c[1], "stereo": x[..., 0], "other": x[..., 1],
-           "fused_max": fuse_max(x[..., 0], x[..., 1], c[0], c[1]),
-           "fused_weighted": fuse_weighted(x[..., 0], x[..., 1], c[0], c[1]),
+           "fused_max": fuse_max(ds, x[..., 1], c[0], c[1]),
+           "fused_weighted": fuse_weighted(ds, x[..., 1], c[0], c[1]),
            "weight_other": softmax_weights(c[0], c[1])[1].astype(np.float32)}
     if post is not None and post.stage == "after":
         out["fused_max"], out["fused_weighted"] = post.apply(out["fused_max"]), post.apply(out["fused_weighted"])
     return out
+
+
+def add_stereo_holes_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--stereo-holes", choices=STEREO_HOLES, default="other",
+                   help="where the stereo input had no value (filled for the CNN): take the ToF/LiDAR value "
+                        "(other, default) or let the filled value compete on confidence (cnn, the thesis)")
 
 
 # ------------------------------------------------------------------ cracktrain fuse
@@ -87,6 +108,7 @@ def add_fuse_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="folder for fused_max.exr, fused_weighted.exr, confidences")
     p.add_argument("--device", default=None)
     add_post_args(p, default="none")
+    add_stereo_holes_arg(p)
 
 
 def _read_map(path: str | None, flag: str) -> np.ndarray | None:
@@ -127,9 +149,9 @@ def run_fuse(args: argparse.Namespace) -> dict[str, Any]:
         inp = build_inputs(variant, stereo, other, read_rgb(args.left), read_rgb(args.right), amp, cfg["densify"])
     except FusionInputError as exc:
         raise TrainerInputError(str(exc)) from None
-    maps = fuse_scene(model, cfg, inp.x, device, post_filter_from_args(args))
+    maps = fuse_scene(model, cfg, inp.x, device, post_filter_from_args(args), inp.stereo_valid, args.stereo_holes)
     written = write_maps(Path(args.out), {k: maps[k] for k in ("fused_max", "fused_weighted", "conf_stereo", "conf_other")})
-    res: dict[str, Any] = {"out": str(args.out), "written": [p.name for p in written]}
+    res: dict[str, Any] = {"out": str(args.out), "written": [p.name for p in written], "stereo_holes": args.stereo_holes}
     if gt is not None:
         if gt.shape != stereo.shape:
             raise TrainerInputError(f"--gt is {gt.shape}, --stereo is {stereo.shape}")

@@ -42,6 +42,7 @@ class FusionScene:
     key: str
     x: np.ndarray  # (H,W,C) float32 raw input channels, VARIANTS order
     gt: np.ndarray | None  # (H,W) float32 GT disparity, -1 none
+    stereo_valid: np.ndarray | None = None  # (H,W) bool: measured stereo (not a filled hole); None = all
 
 
 def _external(folder: str | Path | None, key: str) -> np.ndarray | None:
@@ -71,7 +72,7 @@ def scene_from_sample(sample: dict, variant: str, densify: str = "normconv", ste
                            sample.get("tofamp"), densify)
     except FusionInputError as exc:
         raise TrainerInputError(f"sample {key}: {exc}") from None
-    return FusionScene(key, inp.x, np.asarray(sample["disp_gt"], np.float32))
+    return FusionScene(key, inp.x, np.asarray(sample["disp_gt"], np.float32), inp.stereo_valid)
 
 
 def load_shard_scenes(path: str | Path, variant: str, keys: Sequence[str] | None = None, densify: str = "normconv",

@@ -24,7 +24,7 @@ from fusion.depth_metrics import average_metrics, disparity_metrics, format_tabl
 from fusion.fusion_inputs import OTHER_NAME
 from fusion.postfilter import PostFilter
 from trainer.errors import TrainerInputError
-from trainer.fusion_apply import fuse_scene, load_fusion_model
+from trainer.fusion_apply import add_stereo_holes_arg, fuse_scene, load_fusion_model
 from trainer.fusion_data import load_shard_scenes, shard_keys
 from trainer.fusion_real import add_real_args, real_scene
 
@@ -42,19 +42,22 @@ def add_fusion_eval_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default=None)
     p.add_argument("--threads", type=int, default=0)
     p.add_argument("--no-progress", action="store_true")
+    add_stereo_holes_arg(p)
     add_real_args(p)
 
 
-def evaluate_scene(model, cfg, scene, device, filters: dict[str, PostFilter]) -> dict[str, dict[str, float]]:
+def evaluate_scene(model, cfg, scene, device, filters: dict[str, PostFilter],
+                   stereo_holes: str = "other") -> dict[str, dict[str, float]]:
     """Metrics of every row for one scene."""
-    base = fuse_scene(model, cfg, scene.x, device)
+    base = fuse_scene(model, cfg, scene.x, device, None, scene.stereo_valid, stereo_holes)
     other = OTHER_NAME[cfg["variant"]]
     rows = {"stereo": disparity_metrics(base["stereo"], scene.gt),
             other: disparity_metrics(base["other"], scene.gt),
             "fused, max": disparity_metrics(base["fused_max"], scene.gt),
             "fused, weighted": disparity_metrics(base["fused_weighted"], scene.gt)}
     for name, f in filters.items():
-        fused = f.apply(base["fused_max"]) if f.stage == "after" else fuse_scene(model, cfg, scene.x, device, f)["fused_max"]
+        fused = (f.apply(base["fused_max"]) if f.stage == "after" else
+                 fuse_scene(model, cfg, scene.x, device, f, scene.stereo_valid, stereo_holes)["fused_max"])
         rows[name] = disparity_metrics(fused, scene.gt)
     return rows
 
@@ -88,12 +91,12 @@ def run_fusion_eval(args: argparse.Namespace) -> dict[str, Any]:
                         "CLAHE before, fused max": PostFilter("clahe", "before")})
     per_scene = {}
     for s in tqdm(scenes, desc="fusion-eval", unit="scene", disable=args.no_progress):
-        per_scene[s.key] = evaluate_scene(model, cfg, s, device, filters)
+        per_scene[s.key] = evaluate_scene(model, cfg, s, device, filters, args.stereo_holes)
     rows = list(next(iter(per_scene.values())))
     mean = {r: average_metrics(per_scene[k][r] for k in per_scene) for r in rows}
     table = format_table(mean)
     res = {"data": str(data), "keys": "real" if args.real_stereo else args.keys, "scenes": len(scenes), "variant": cfg["variant"],
-           "ckpt": str(args.ckpt), "mean": mean, "per_scene": per_scene, "table": table}
+           "ckpt": str(args.ckpt), "stereo_holes": args.stereo_holes, "mean": mean, "per_scene": per_scene, "table": table}
     if args.out:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)

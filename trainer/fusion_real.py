@@ -57,7 +57,7 @@ def real_scene(folder: str | Path, args: argparse.Namespace, densify: str) -> Fu
     rng = np.random.default_rng(np.random.SeedSequence([args.seed, zlib.crc32(folder.name.encode())]))
     lidar = scanline_lidar(gt, args.lidar_lines, rng, args.lidar_sigma_px, args.lidar_dropout)
     try:
-        x = build_inputs("lidar", stereo, lidar, left, right, None, densify).x
+        inp = build_inputs("lidar", stereo, lidar, left, right, None, densify)
     except FusionInputError as exc:
         raise TrainerInputError(f"--real-stereo {folder}: {exc}") from None
-    return FusionScene(folder.name, x, gt.astype(np.float32))
+    return FusionScene(folder.name, inp.x, gt.astype(np.float32), inp.stereo_valid)

@@ -68,7 +68,7 @@ TARGET_RUNS = (*ADAPT_RUNS, BN_RUN)  # rows that need --target
 
 
 def add_sim2real_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--synthetic", default=None, help="synthetic shards")
+    p.add_argument("--synthetic", default=None, help="synthetic shards (A,B: several datasets together)")
     p.add_argument("--real", required=True, help="real training folder (or the whole folder with --real-test-fraction)")
     p.add_argument("--real-test", default=None, help="real test folder")
     p.add_argument("--real-test-fraction", type=float, default=0.0)

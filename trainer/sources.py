@@ -154,7 +154,23 @@ class RealFolder:
 # --------------------------------------------------------------------- shards
 
 def list_shards(path: str | Path) -> list[Path]:
-    """Finished shard tars of a dataset dir (manifest order), or a single tar."""
+    """Finished shard tars of a dataset dir (manifest order), or a single tar.
+
+    ``A,B`` lists several datasets in that order, so renders of different recipes
+    train together without being copied into one folder.
+    """
+    parts = [s.strip() for s in str(path).split(",")]
+    if len(parts) > 1:
+        if not all(parts):
+            raise TrainerInputError(f"shard path list {str(path)!r} has an empty entry")
+        found = [s for part in parts for s in _list_one(part)]
+        if len(set(found)) != len(found):
+            raise TrainerInputError(f"shard path list {str(path)!r} names the same shard twice")
+        return found
+    return _list_one(path)
+
+
+def _list_one(path: str | Path) -> list[Path]:
     from crackgen.shards import list_shards as _list  # pure-Python reader
 
     p = Path(path)

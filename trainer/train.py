@@ -65,7 +65,7 @@ DEPTH_INPUT_ARGS = ("depth", "valid_channel", "depth_near", "depth_far", "depth_
 
 
 def add_seg_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--data", default=None, help="synthetic dataset folder (shards) or one .tar")
+    p.add_argument("--data", default=None, help="synthetic dataset folder (shards) or one .tar; A,B: several together")
     p.add_argument("--real", default=None, help="real image/mask folder to train on (mixed with --data)")
     p.add_argument("--real-repeat", type=int, default=None, help="repeat the real set N times (default: thesis rule)")
     p.add_argument("--val-data", default=None, help="synthetic validation shards")

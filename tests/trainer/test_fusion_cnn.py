@@ -198,3 +198,30 @@ def test_real_stereo_scene_has_lidar_inputs_and_gt():
     assert np.median(np.abs(s.x[..., 1] - s.gt)[ok]) < 1.0  # interpolated scan lines follow the GT
     with pytest.raises(TrainerInputError, match="neither"):
         real_scene(REAL_CONES.parent, args, "normconv")
+
+
+def test_filled_stereo_holes_take_the_other_sensor_unless_asked(fusion_shards):
+    from fusion.fusion_inputs import build_inputs
+    from trainer.fusion_apply import fuse_scene
+
+    smp = fusion_sample(np.random.default_rng(5))
+    stereo = smp["disp_sgm.exr"].copy()
+    stereo[10:20, 5:25] = -1.0  # an occlusion the stereo matcher left empty
+    inp = build_inputs("lidar", stereo, smp["disp_lidar.exr"], smp["rgb.png"], smp["right.png"])
+    hole = ~inp.stereo_valid
+    assert hole.sum() == 200 and (inp.x[..., 0][hole] > 0).all()  # the CNN still gets a dense map
+    torch.manual_seed(0)
+    model = ConfidenceCNN(3).eval()
+    with torch.no_grad():  # stereo always more confident: the filled value would win everywhere
+        model.net[-1].weight.zero_()
+        model.net[-1].bias.copy_(torch.tensor([5.0, -5.0]))
+    cfg = {"mean": [0.0] * 3, "std": [1.0] * 3}
+    dev = torch.device("cpu")
+    refused = fuse_scene(model, cfg, inp.x, dev, None, inp.stereo_valid)
+    kept = fuse_scene(model, cfg, inp.x, dev, None, inp.stereo_valid, stereo_holes="cnn")
+    for rule in ("fused_max", "fused_weighted"):
+        np.testing.assert_array_equal(refused[rule][hole], inp.x[..., 1][hole])
+        np.testing.assert_array_equal(refused[rule][~hole], kept[rule][~hole])
+    np.testing.assert_array_equal(kept["fused_max"], inp.x[..., 0])
+    with pytest.raises(TrainerInputError, match="--stereo-holes"):
+        fuse_scene(model, cfg, inp.x, dev, None, inp.stereo_valid, stereo_holes="both")

@@ -104,3 +104,17 @@ def test_rgb_and_rgbd_runs_score_the_same_held_out_pixels(shards, tmp_path):
     assert totals[0] == totals[1] == totals[2]
     cfg = load_model(tmp_path / "tof" / "checkpoint.pt", torch.device("cpu"))[1]
     assert isinstance(cfg, SampleConfig) and cfg.channels == "rgbdv"  # sparse ToF: validity on by default
+
+
+def test_a_comma_list_trains_several_datasets_together(shards, tmp_path, capsys):
+    other = write_shards(tmp_path / "other", n_shards=1, per_shard=3, seed=7)
+    both = ShardSource(f"{shards},{other}", "none")
+    assert len(both.shards) == 3 and len(both) == 8 + 3
+    masks = [s["mask"] for i in range(3) for s in both.iter_shard(i)]
+    alone = [s["mask"] for s in ShardSource(other, "none").iter_shard(0)]
+    assert all(np.array_equal(a, b) for a, b in zip(masks[8:], alone))  # same keys, other dataset: both kept
+    with pytest.raises(TrainerInputError, match="same shard twice"):
+        ShardSource(f"{shards},{shards}", "none")
+    assert _seg(shards, tmp_path / "run", "--data", f"{shards},{tmp_path / 'missing'}") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "missing" in err[0]
