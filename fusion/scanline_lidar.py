@@ -28,3 +28,22 @@ def scanline_lidar(gt_disp: np.ndarray, lines: int, rng: np.random.Generator, si
     noisy = gt[rows] + rng.normal(0.0, sigma_px, (len(rows), w)).astype(np.float32)
     out[rows] = np.where(hit & (noisy > 0), noisy, -1.0)
     return out
+
+
+def random_scanline_lidar(gt_disp: np.ndarray, rng: np.random.Generator, spacing_px: tuple[float, float] = (4.0, 20.0),
+                          sigma_px: tuple[float, float] = (0.05, 1.0), dropout: tuple[float, float] = (0.0, 0.3)
+                          ) -> tuple[np.ndarray, dict[str, float]]:
+    """``scanline_lidar`` with its quality drawn at random: line spacing (rows) uniform, noise
+    log-uniform, dropout uniform. Returns the sparse map and the drawn parameters.
+
+    Why: a rendered rig has one LiDAR, so a confidence CNN trained on it learns how
+    good *that* LiDAR is relative to stereo instead of reading the images; drawing
+    the density and noise per training scene makes the LiDAR's quality something to
+    read from the evidence (the LiDAR-warped grey difference).
+    """
+    h = np.asarray(gt_disp).shape[0]
+    spacing = float(rng.uniform(*spacing_px))
+    sigma = float(np.exp(rng.uniform(np.log(sigma_px[0]), np.log(sigma_px[1]))))
+    drop = float(rng.uniform(*dropout))
+    lines = max(2, int(round(h / spacing)))
+    return scanline_lidar(gt_disp, lines, rng, sigma, drop), {"lines": lines, "sigma_px": sigma, "dropout": drop}

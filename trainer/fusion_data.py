@@ -21,6 +21,7 @@ outside, so no GT value is invented.
 from __future__ import annotations
 
 import logging
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -29,6 +30,7 @@ import cv2
 import numpy as np
 
 from fusion.fusion_inputs import VARIANTS, FusionInputError, build_inputs
+from fusion.scanline_lidar import random_scanline_lidar
 from trainer.errors import TrainerInputError
 from trainer.imageio import DEPTH_EXTS, read_float_map
 
@@ -75,10 +77,28 @@ def scene_from_sample(sample: dict, variant: str, densify: str = "normconv", ste
     return FusionScene(key, inp.x, np.asarray(sample["disp_gt"], np.float32), inp.stereo_valid)
 
 
+def resampled_lidar_scenes(scene: FusionScene, sample: dict, copies: int, seed: int,
+                           densify: str = "normconv") -> list[FusionScene]:
+    """``copies`` more scenes of one LiDAR-variant sample, each with a scan-line LiDAR
+    re-drawn from its GT at a random density and noise (``random_scanline_lidar``); the
+    stereo channel is the sample's own. Keys ``KEY~lidarJ``; draws seeded by (seed, key, J)."""
+    out = []
+    for j in range(copies):
+        rng = np.random.default_rng(np.random.SeedSequence([seed, zlib.crc32(scene.key.encode()), j]))
+        lidar, _ = random_scanline_lidar(scene.gt, rng)
+        if not (lidar > 0).any():
+            continue
+        stereo = np.where(scene.stereo_valid, scene.x[..., 0], -1.0) if scene.stereo_valid is not None else scene.x[..., 0]
+        inp = build_inputs("lidar", stereo, lidar, sample["rgb"], sample["right"], None, densify)
+        out.append(FusionScene(f"{scene.key}~lidar{j}", inp.x, scene.gt, inp.stereo_valid))
+    return out
+
+
 def load_shard_scenes(path: str | Path, variant: str, keys: Sequence[str] | None = None, densify: str = "normconv",
                       stereo_dir: str | Path | None = None, other_dir: str | Path | None = None,
-                      progress: bool = True) -> list[FusionScene]:
-    """All (or ``keys``) samples of a dataset as scenes, in key order."""
+                      progress: bool = True, lidar_resample: int = 0, seed: int = 0) -> list[FusionScene]:
+    """All (or ``keys``) samples of a dataset as scenes, in key order; with ``lidar_resample`` K
+    (LiDAR variant) each sample also gives K scenes with a re-drawn LiDAR (``resampled_lidar_scenes``)."""
     from tqdm import tqdm
 
     from crackgen.shards import iter_samples, list_shards
@@ -91,9 +111,12 @@ def load_shard_scenes(path: str | Path, variant: str, keys: Sequence[str] | None
     try:
         if not list_shards(path):
             raise TrainerInputError(f"--data {path} holds no shards")
-        scenes = [scene_from_sample(s, variant, densify, stereo_dir, other_dir)
-                  for s in tqdm(iter_samples(path, keys=keys, members=members), desc="fusion inputs",
-                                unit="scene", disable=not progress, total=len(keys) if keys is not None else None)]
+        scenes = []
+        for s in tqdm(iter_samples(path, keys=keys, members=members), desc="fusion inputs",
+                      unit="scene", disable=not progress, total=len(keys) if keys is not None else None):
+            scenes.append(scene_from_sample(s, variant, densify, stereo_dir, other_dir))
+            if lidar_resample > 0:
+                scenes += resampled_lidar_scenes(scenes[-1], s, lidar_resample, seed, densify)
     except TrainerInputError:
         raise
     except Exception as exc:  # ShardError, CodecError, ManifestError: name the dataset

@@ -52,7 +52,7 @@ log = logging.getLogger(__name__)
 
 OPTIMIZERS = ("adadelta", "adam")
 RESUME_FIXED_ARGS = {"variant": None, "seed": None, "val_fraction": None, "split_seed": None, "densify": None,
-                     "disp_ref": "none", "stereo_failures": 0.0}  # name -> value assumed for checkpoints made before the option
+                     "disp_ref": "none", "stereo_failures": 0.0, "lidar_resample": 0}  # name -> value assumed for checkpoints made before the option
 
 
 def add_fusion_args(p: argparse.ArgumentParser) -> None:
@@ -74,6 +74,9 @@ def add_fusion_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--stereo-failures", type=float, default=0.0, metavar="P",
                    help="lidar variant: probability per patch of SGBM region failures pasted into the stereo "
                         "channel (offset / flat fill / speckle; trainer.fusion_augment); 0 = off (thesis)")
+    p.add_argument("--lidar-resample", type=int, default=0, metavar="K",
+                   help="lidar variant: K more copies of each training scene with a scan-line LiDAR re-drawn from "
+                        "the GT at a random density (4-20 rows apart), noise (0.05-1 px) and dropout (0-30%%); 0 = off")
     p.add_argument("--stereo-dir", default=None, help="external stereo disparity per sample: DIR/KEY.{exr,pfm,npy,...}")
     p.add_argument("--other-dir", default=None, help="external ToF/LiDAR disparity (e.g. completed LiDAR) per sample")
     p.add_argument("--val-every", type=int, default=0, help="validate every N steps (0: only at the end)")
@@ -215,6 +218,11 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
     if args.stereo_failures > 0 and args.variant != "lidar":
         raise TrainerInputError("--stereo-failures needs --variant lidar: the ToF variant's grey difference is "
                                 "warped by the stereo disparity, which a pasted failure would contradict")
+    if args.lidar_resample < 0 or (args.lidar_resample > 0 and args.variant != "lidar"):
+        raise TrainerInputError(f"--lidar-resample must be >= 0 and needs --variant lidar, got {args.lidar_resample} "
+                                f"with --variant {args.variant}")
+    if args.lidar_resample > 0 and args.other_dir:
+        raise TrainerInputError("--lidar-resample re-draws the LiDAR from the GT: it cannot be combined with --other-dir")
     device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
     if device.type == "cuda" and not torch.cuda.is_available():
         raise TrainerInputError("--device cuda but CUDA is not available")
@@ -227,7 +235,7 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
     progress = not args.no_progress
     load = dict(variant=args.variant, densify=args.densify, stereo_dir=args.stereo_dir, other_dir=args.other_dir,
                 progress=progress)
-    train = load_shard_scenes(args.data, keys=train_keys, **load)
+    train = load_shard_scenes(args.data, keys=train_keys, lidar_resample=args.lidar_resample, seed=args.seed, **load)
     val = load_shard_scenes(args.data, keys=val_keys, **load) if val_keys else []
     mean, std = channel_stats(train, args.disp_ref) if ckpt is None else (ckpt["sample_config"]["mean"], ckpt["sample_config"]["std"])
     torch.manual_seed(args.seed)

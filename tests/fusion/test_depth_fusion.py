@@ -129,3 +129,19 @@ def test_scanline_lidar_samples_the_gt_on_evenly_spaced_rows():
     noisy = scanline_lidar(gt, 5, np.random.default_rng(0), sigma_px=0.5, dropout=0.5)
     hit = noisy > 0
     assert 0.3 < hit[rows][:, 3:].mean() < 0.7 and 0.3 < np.std(noisy[hit] - 12.0) < 0.7
+
+
+def test_random_scanline_lidar_draws_its_quality_in_range_and_is_seeded():
+    from fusion.scanline_lidar import random_scanline_lidar
+
+    gt = np.full((200, 40), 20.0, np.float32)
+    draws = [random_scanline_lidar(gt, np.random.default_rng(s)) for s in range(40)]
+    for lid, p in draws:
+        rows = np.flatnonzero((lid > 0).any(axis=1))
+        assert 10 <= p["lines"] <= 50 and len(rows) <= p["lines"]  # 4-20 rows apart on 200 rows
+        assert 0.05 <= p["sigma_px"] <= 1.0 and 0.0 <= p["dropout"] <= 0.3
+        assert abs(np.std(lid[lid > 0] - 20.0) - p["sigma_px"]) < 0.25 * p["sigma_px"] + 0.02
+    assert len({p["lines"] for _, p in draws}) > 10  # the density really varies
+    a, pa = random_scanline_lidar(gt, np.random.default_rng(7))
+    b, pb = random_scanline_lidar(gt, np.random.default_rng(7))
+    assert pa == pb and np.array_equal(a, b)

@@ -225,3 +225,27 @@ def test_filled_stereo_holes_take_the_other_sensor_unless_asked(fusion_shards):
     np.testing.assert_array_equal(kept["fused_max"], inp.x[..., 0])
     with pytest.raises(TrainerInputError, match="--stereo-holes"):
         fuse_scene(model, cfg, inp.x, dev, None, inp.stereo_valid, stereo_holes="both")
+
+
+def test_lidar_resample_adds_scenes_with_a_redrawn_lidar_and_the_same_stereo(fusion_shards, tmp_path, capsys):
+    plain = load_shard_scenes(fusion_shards, "lidar", progress=False)
+    more = load_shard_scenes(fusion_shards, "lidar", progress=False, lidar_resample=2, seed=0)
+    assert len(more) == 3 * len(plain)
+    by_key = {s.key: s for s in more}
+    for s in plain:
+        for j in range(2):
+            r = by_key[f"{s.key}~lidar{j}"]
+            np.testing.assert_array_equal(r.x[..., 0], s.x[..., 0])  # stereo untouched
+            np.testing.assert_array_equal(r.gt, s.gt)
+            assert not np.array_equal(r.x[..., 1], s.x[..., 1])  # a new LiDAR ...
+            assert not np.array_equal(r.x[..., 2], s.x[..., 2])  # ... and its own warped grey difference
+            assert np.median(np.abs(r.x[..., 1] - s.gt)) < 1.0  # still a LiDAR of this scene
+    again = load_shard_scenes(fusion_shards, "lidar", progress=False, lidar_resample=2, seed=0)
+    assert all(np.array_equal(a.x, b.x) for a, b in zip(more, again))
+    out = tmp_path / "run"
+    assert cli_main(["fusion", "--data", str(fusion_shards), "--variant", "lidar", "--lidar-resample", "2",
+                     "--patch", "16", "-b", "2", "--steps", "2", "--no-progress", "--out", str(out)]) == 0
+    assert cli_main(["fusion", "--data", str(fusion_shards), "--lidar-resample", "2", "--steps", "1",
+                     "--no-progress", "--out", str(tmp_path / "tof")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--lidar-resample" in err[0] and not (tmp_path / "tof" / "last.pt").exists()
