@@ -51,18 +51,20 @@ def post_filter_from_args(args: argparse.Namespace) -> PostFilter | None:
         raise TrainerInputError(str(exc)) from None
 
 
-STEREO_HOLES = ("other", "cnn")
+STEREO_HOLES = ("cnn", "other")
 
 
 def fuse_scene(model: ConfidenceCNN, cfg: dict[str, Any], x: np.ndarray, device: torch.device,
                post: PostFilter | None = None, stereo_valid: np.ndarray | None = None,
-               stereo_holes: str = "other") -> dict[str, np.ndarray]:
+               stereo_holes: str = "cnn") -> dict[str, np.ndarray]:
     """Raw input stack (H,W,C) -> confidences and fused maps (max and weighted rules).
 
-    ``stereo_holes="other"``: where the stereo had no measurement (``stereo_valid``
-    False, a hole filled for the CNN's input) the rules take the ToF/LiDAR value,
-    as they do for any candidate without a value; ``"cnn"``: the filled value
-    competes on its confidence like a measured one (the thesis's dense input).
+    ``stereo_holes="cnn"`` (the thesis's dense input): a filled stereo hole competes
+    on its confidence like a measured value. ``"other"``: where the stereo had no
+    measurement (``stereo_valid`` False) the rules take the ToF/LiDAR value, as they
+    do for any candidate without a value. On the flat renders the filled holes
+    (mostly SGBM's left band) are good extrapolations and ``cnn`` is better; on real
+    scenes they span occlusions and ``other`` is better (README, *Depth fusion*).
     """
     if stereo_holes not in STEREO_HOLES:
         raise TrainerInputError(f"--stereo-holes must be one of {', '.join(STEREO_HOLES)}, got {stereo_holes!r}")
@@ -83,9 +85,10 @@ def fuse_scene(model: ConfidenceCNN, cfg: dict[str, Any], x: np.ndarray, device:
 
 
 def add_stereo_holes_arg(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--stereo-holes", choices=STEREO_HOLES, default="other",
-                   help="where the stereo input had no value (filled for the CNN): take the ToF/LiDAR value "
-                        "(other, default) or let the filled value compete on confidence (cnn, the thesis)")
+    p.add_argument("--stereo-holes", choices=STEREO_HOLES, default="cnn",
+                   help="where the stereo input had no value (filled for the CNN): let the filled value compete on "
+                        "confidence (cnn, the thesis, default) or take the ToF/LiDAR value (other: real scenes "
+                        "with occlusions)")
 
 
 # ------------------------------------------------------------------ cracktrain fuse

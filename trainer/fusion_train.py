@@ -183,8 +183,7 @@ def validate(run: FusionRun) -> dict[str, float]:
         losses.append(float(np.mean((c[ok] - t[ok]) ** 2)))
         mae["stereo"].append(disparity_metrics(s.x[..., 0], s.gt)["mae"])
         mae["other"].append(disparity_metrics(s.x[..., 1], s.gt)["mae"])
-        ds = s.x[..., 0] if s.stereo_valid is None else np.where(s.stereo_valid, s.x[..., 0], np.float32(-1.0))
-        mae["fused_max"].append(disparity_metrics(fuse_max(ds, s.x[..., 1], c[0], c[1]), s.gt)["mae"])
+        mae["fused_max"].append(disparity_metrics(fuse_max(s.x[..., 0], s.x[..., 1], c[0], c[1]), s.gt)["mae"])
     out = {"val_loss": float(np.mean(losses))}
     out.update({f"val_mae_{k}": float(np.nanmean(v)) for k, v in mae.items()})
     return out

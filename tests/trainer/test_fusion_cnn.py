@@ -217,8 +217,8 @@ def test_filled_stereo_holes_take_the_other_sensor_unless_asked(fusion_shards):
         model.net[-1].bias.copy_(torch.tensor([5.0, -5.0]))
     cfg = {"mean": [0.0] * 3, "std": [1.0] * 3}
     dev = torch.device("cpu")
-    refused = fuse_scene(model, cfg, inp.x, dev, None, inp.stereo_valid)
-    kept = fuse_scene(model, cfg, inp.x, dev, None, inp.stereo_valid, stereo_holes="cnn")
+    refused = fuse_scene(model, cfg, inp.x, dev, None, inp.stereo_valid, stereo_holes="other")
+    kept = fuse_scene(model, cfg, inp.x, dev, None, inp.stereo_valid)  # the thesis default
     for rule in ("fused_max", "fused_weighted"):
         np.testing.assert_array_equal(refused[rule][hole], inp.x[..., 1][hole])
         np.testing.assert_array_equal(refused[rule][~hole], kept[rule][~hole])
