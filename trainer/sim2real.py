@@ -13,7 +13,10 @@ real test set, P/R/F1/IoU at its best-F1 threshold and F1 at 0.5):
 - ``mixed``: synthetic + real (real repeated N times, thesis rule);
 - ``finetune``: synthetic pretraining for ``--finetune-fraction`` of the budget (adapted
   when ``--target`` is given, unless ``--plain-pretrain``), then fine-tuning on the real split
-  for the rest (at ``--finetune-lr``): the same total step budget as every other row.
+  for the rest (at ``--finetune-lr``): the same total step budget as every other row. With
+  ``--pretrained CKPT`` (a finished synthetic model, a reusable asset like an ImageNet one)
+  the row fine-tunes it on the real split for the whole ``--max-steps``: the same *real* steps
+  as the ``real`` row.
 
 ``--curve 0,10,30,...`` instead runs the label-efficiency curve (``trainer.curve``):
 for each N and repeat, real-only and synthetic -> fine-tune on the same N photos with the
@@ -101,7 +104,8 @@ def add_sim2real_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--curve-steps", type=int, default=None, help="curve: steps per model on N photos (default --max-steps)")
     p.add_argument("--pretrain-steps", type=int, default=None, help="curve: synthetic pretraining steps (default --max-steps)")
     p.add_argument("--pretrained", default=None, metavar="CKPT",
-                   help="curve: start the fine-tune arm from this synthetic checkpoint instead of pretraining")
+                   help="finetune row and curve: start from this synthetic checkpoint instead of pretraining "
+                        "(the finetune row then spends all --max-steps on the real split)")
     p.add_argument("--out", default="runs/sim2real")
     p.add_argument("--device", default=None)
     p.add_argument("--no-progress", action="store_true")
@@ -184,7 +188,7 @@ def wanted_runs(args: argparse.Namespace) -> list[str]:
 def run_row(name: str, args: argparse.Namespace, out: Path, train_stems: list[str] | None,
             targets: tuple[str, ...] | None, test: RealFolder, device: torch.device) -> dict[str, Any]:
     """Train and score one row; a row that needs synthetic shards is skipped without them."""
-    if name != "real" and not args.synthetic:
+    if name != "real" and not args.synthetic and not (name == "finetune" and args.pretrained):
         return {"skipped": "no --synthetic shards given"}
     stems = train_stems
     if name == "real":
@@ -199,12 +203,14 @@ def run_row(name: str, args: argparse.Namespace, out: Path, train_stems: list[st
         return train_and_score(seg_args(args, out / name, args.synthetic, None, None), test, args, device)
     if name == BN_RUN:
         return target_bn_row(args, out, targets, test, device)
+    if args.finetune_lr is not None and not args.finetune_lr > 0:
+        raise TrainerInputError(f"--finetune-lr must be > 0, got {args.finetune_lr}")
+    if args.pretrained:
+        return finetune_pretrained_row(args, out, name, stems, test, device)
     # finetune: pretrain on synthetic (adapted when targets exist), then the rest of the budget on real
     if not 0.0 < args.finetune_fraction < 1.0:
         raise TrainerInputError(f"--finetune-fraction must be in (0, 1), got {args.finetune_fraction}")
     pre_steps = max(1, round(args.max_steps * args.finetune_fraction))
-    if args.finetune_lr is not None and not args.finetune_lr > 0:
-        raise TrainerInputError(f"--finetune-lr must be > 0, got {args.finetune_lr}")
     pre_targets = None if args.plain_pretrain else targets
     pre = seg_args(args, out / "finetune_pretrain", args.synthetic, None, None, max_steps=pre_steps,
                    adapt_targets=pre_targets)
@@ -218,6 +224,17 @@ def run_row(name: str, args: argparse.Namespace, out: Path, train_stems: list[st
     res["finetune_lr"] = args.finetune_lr or args.lr
     res["train_seconds"] = round(time.perf_counter() - t0, 1)
     res["steps"] = args.max_steps
+    return res
+
+
+def finetune_pretrained_row(args: argparse.Namespace, out: Path, name: str, stems: list[str] | None,
+                            test: RealFolder, device: torch.device) -> dict[str, Any]:
+    """``--pretrained CKPT`` fine-tuned on the real split for all ``--max-steps``."""
+    pre_step = int(load_checkpoint(args.pretrained).get("step", 0))
+    ft = seg_args(args, out / name, None, args.real, stems, init=str(args.pretrained), lr=args.finetune_lr or args.lr)
+    res = train_and_score(ft, test, args, device)
+    res.update({"pretrained": str(args.pretrained), "pretrain_steps": pre_step, "finetune_lr": args.finetune_lr or args.lr,
+                "steps": args.max_steps})
     return res
 
 
@@ -239,6 +256,8 @@ def target_bn_row(args: argparse.Namespace, out: Path, targets: tuple[str, ...] 
 
 
 def run_sim2real(args: argparse.Namespace) -> dict[str, Any]:
+    if args.pretrained and not Path(args.pretrained).is_file():
+        raise TrainerInputError(f"--pretrained {args.pretrained} does not exist")
     if args.curve:
         return run_curve(args)
     out = Path(args.out)

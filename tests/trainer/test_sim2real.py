@@ -139,3 +139,23 @@ def test_finetune_lr_and_plain_pretraining(data, tmp_path, capsys):
                  "--real-test-fraction", "0.25", "--runs", "finetune", "--finetune-lr", "0",
                  "--out", str(out), *COMMON]) == 2
     assert "--finetune-lr must be > 0" in capsys.readouterr().err
+
+
+def test_finetune_row_from_a_pretrained_synthetic_model_spends_every_step_on_real(data, tmp_path, capsys):
+    syn = tmp_path / "syn"
+    assert main(["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]),
+                 "--real-test-fraction", "0.25", "--max-steps", "2", "--runs", "synthetic", "--out", str(syn), *COMMON]) == 0
+    pre = syn / "synthetic" / "checkpoint.pt"
+    out = tmp_path / "ft"
+    assert main(["sim2real", "--pretrained", str(pre), "--real", str(data["real"]), "--real-test-fraction", "0.25",
+                 "--max-steps", "3", "--runs", "finetune", "--out", str(out), *COMMON]) == 0  # no --synthetic needed
+    ft = json.loads((out / "sim2real.json").read_text())["runs"]["finetune"]
+    assert ft["pretrained"] == str(pre) and ft["pretrain_steps"] == 2 and ft["steps"] == 3
+    ckpt = load_checkpoint(out / "finetune" / "checkpoint.pt")
+    assert ckpt["step"] == 3 and ckpt["args"]["init"] == str(pre) and ckpt["args"]["data"] is None
+    assert not (out / "finetune_pretrain").exists()
+    assert main(["sim2real", "--pretrained", str(tmp_path / "nope.pt"), "--real", str(data["real"]),
+                 "--real-test-fraction", "0.25", "--max-steps", "3", "--runs", "finetune", "--out", str(out), *COMMON]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "nope.pt" in err[0]
+    assert json.loads((out / "sim2real.json").read_text())["runs"]["finetune"] == ft  # the finished row is kept
