@@ -105,6 +105,8 @@ def load_shard_scenes(path: str | Path, variant: str, keys: Sequence[str] | None
 
     if variant not in VARIANTS:
         raise TrainerInputError(f"unknown --variant {variant!r}; choose from {', '.join(VARIANTS)}")
+    if lidar_resample and variant != "lidar":
+        raise TrainerInputError(f"--lidar-resample needs --variant lidar, got {variant}")
     if not Path(path).exists():
         raise TrainerInputError(f"--data {path} does not exist")
     members = {"rgb", "right", "disp_sgm", "disp_gt", *OTHER_MEMBERS[variant]}
