@@ -89,3 +89,19 @@ def build_inputs(
         lr = left_right_difference(left, right, do)
         x = np.stack([ds, do, lr], axis=-1)
     return FusionInputs(variant, x.astype(np.float32), stereo_valid)
+
+
+def replace_lidar(inputs: FusionInputs, disp_lidar: np.ndarray, left: np.ndarray, right: np.ndarray,
+                  densify: str = "normconv") -> FusionInputs:
+    """A LiDAR-variant input with another LiDAR map: channels 1 and 2 rebuilt, the (already
+    densified) stereo channel and its validity kept, so the stereo is not densified again."""
+    if inputs.variant != "lidar":
+        raise FusionInputError(f"replace_lidar needs a lidar-variant input, got {inputs.variant!r}")
+    _shape_check(inputs.x.shape[:2], disp_lidar=disp_lidar, left=left, right=right)
+    if not valid_values(disp_lidar).any():
+        raise FusionInputError("the LiDAR disparity has no valid pixel")
+    x = inputs.x.copy()
+    x[..., 1] = interpolate_sparse(disp_lidar, densify)
+    x[..., 2] = left_right_difference(left, right, x[..., 1])
+    return FusionInputs("lidar", x, inputs.stereo_valid)
+

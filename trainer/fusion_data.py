@@ -29,7 +29,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from fusion.fusion_inputs import VARIANTS, FusionInputError, build_inputs
+from fusion.fusion_inputs import VARIANTS, FusionInputError, FusionInputs, build_inputs, replace_lidar
 from fusion.scanline_lidar import random_scanline_lidar
 from trainer.errors import TrainerInputError
 from trainer.imageio import DEPTH_EXTS, read_float_map
@@ -88,8 +88,8 @@ def resampled_lidar_scenes(scene: FusionScene, sample: dict, copies: int, seed: 
         lidar, _ = random_scanline_lidar(scene.gt, rng)
         if not (lidar > 0).any():
             continue
-        stereo = np.where(scene.stereo_valid, scene.x[..., 0], -1.0) if scene.stereo_valid is not None else scene.x[..., 0]
-        inp = build_inputs("lidar", stereo, lidar, sample["rgb"], sample["right"], None, densify)
+        inp = replace_lidar(FusionInputs("lidar", scene.x, scene.stereo_valid), lidar, sample["rgb"], sample["right"],
+                            densify)
         out.append(FusionScene(f"{scene.key}~lidar{j}", inp.x, scene.gt, inp.stereo_valid))
     return out
 

@@ -47,7 +47,7 @@ def add_fusion_eval_args(p: argparse.ArgumentParser) -> None:
 
 
 def evaluate_scene(model, cfg, scene, device, filters: dict[str, PostFilter],
-                   stereo_holes: str = "other") -> dict[str, dict[str, float]]:
+                   stereo_holes: str = "cnn") -> dict[str, dict[str, float]]:
     """Metrics of every row for one scene."""
     base = fuse_scene(model, cfg, scene.x, device, None, scene.stereo_valid, stereo_holes)
     other = OTHER_NAME[cfg["variant"]]

@@ -231,10 +231,10 @@ def finetune_pretrained_row(args: argparse.Namespace, out: Path, name: str, stem
                             test: RealFolder, device: torch.device) -> dict[str, Any]:
     """``--pretrained CKPT`` fine-tuned on the real split for all ``--max-steps``."""
     pre_step = int(load_checkpoint(args.pretrained).get("step", 0))
-    ft = seg_args(args, out / name, None, args.real, stems, init=str(args.pretrained), lr=args.finetune_lr or args.lr)
+    lr = args.finetune_lr or args.lr
+    ft = seg_args(args, out / name, None, args.real, stems, init=str(args.pretrained), lr=lr)
     res = train_and_score(ft, test, args, device)
-    res.update({"pretrained": str(args.pretrained), "pretrain_steps": pre_step, "finetune_lr": args.finetune_lr or args.lr,
-                "steps": args.max_steps})
+    res.update({"pretrained": str(args.pretrained), "pretrain_steps": pre_step, "finetune_lr": lr, "steps": args.max_steps})
     return res
 
 
