@@ -7,6 +7,12 @@ different image datablock does make Cycles upload it, so with ``swap=True`` the 
 each sample into the image the node does *not* show and then points the node at it. Two
 fixed datablocks, not one per sample, keep ``bpy.data`` counts flat. Without persistent data
 one image is enough (and renders exactly as before).
+
+Why every image is written once when the slot is made: Blender allocates an image's pixel
+buffer on its first ``foreach_set`` (16 MB for a 1024 px RGBA float map), so with ``swap`` the
+second image's buffers appeared at the second sample (+48 MB for albedo, roughness and normal),
+which read as worker memory growth after the warm-up sample. Filled at build, they are part
+of the scene's fixed cost.
 """
 from __future__ import annotations
 
@@ -28,6 +34,7 @@ class ImageSlot:
     def _new(self, name: str, colorspace: str) -> bpy.types.Image:
         img = bpy.data.images.new(name, self.px, self.px, alpha=False, float_buffer=True)
         img.colorspace_settings.name = colorspace
+        img.pixels.foreach_set(np.zeros(self.px * self.px * 4, dtype=np.float32))  # allocate its buffers now
         return img
 
     @property

@@ -388,6 +388,9 @@ class StereoSection(Section):
     baseline_m: _t(0.001, 10) = _d({"min": 0.06, "max": 0.12}, "stereo baseline (m)")
     num_disparities: int = Field(128, ge=16, le=1024, multiple_of=16, description="SGBM search range (px, x16)")
     block_size: int = Field(5, ge=1, le=31, description="SGBM block size (odd, px)")
+    sgbm_input: Literal["clean", "camera"] = Field(
+        "clean", description="images SGBM matches: clean = the render; camera = after [camera_effects] "
+        "(noise, blur, JPEG), as a real stereo camera sees them")
 
     @model_validator(mode="after")
     def _odd(self) -> "StereoSection":
@@ -497,6 +500,13 @@ class Recipe(Section):
 
     # set by load_recipe; not part of the schema
     _text: str = ""
+
+    @model_validator(mode="after")
+    def _stereo_input(self) -> "Recipe":
+        if self.stereo.enabled and self.stereo.sgbm_input == "camera" and not self.camera_effects.enabled:
+            raise PydanticCustomError("field_ref", "{sub}: \"camera\" needs [camera_effects] enabled = true",
+                                      {"sub": "stereo.sgbm_input"})
+        return self
 
     @property
     def text(self) -> str:

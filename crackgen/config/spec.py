@@ -252,6 +252,7 @@ class StereoSpec:
     baseline_m: float
     num_disparities: int  # SGBM search range (multiple of 16)
     block_size: int  # SGBM block size (odd)
+    sgbm_input: str = "clean"  # clean | camera: the images SGBM matches (older sample JSON: clean)
 
 
 @dataclass
@@ -542,6 +543,7 @@ def _stereo(recipe: Recipe, rng: np.random.Generator) -> StereoSpec:
         baseline_m=baseline if st.enabled else 0.0,
         num_disparities=st.num_disparities,
         block_size=st.block_size,
+        sgbm_input=st.sgbm_input,
     )
 
 

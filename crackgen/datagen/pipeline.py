@@ -221,9 +221,16 @@ class SampleProducer:
                 lidar = simulate_lidar(spec.lidar, rig, caster, sensor_rng(spec.lidar.seed))
             members["lidar.exr"] = lidar.depth_rgb
             sensors["lidar"] = {"fill_rgb": fill_ratio(lidar.depth_rgb), "points": int(len(lidar.points_world))}
+        camera_views = None  # the RGB views after the camera, when SGBM is to match those
+        if rig.right is not None and spec.stereo.sgbm_input == "camera":
+            with tm.stage("camera_effects"):
+                camera_views, camera_effects_meta = camera_effects_members(
+                    spec.camera_effects, {"rgb.png": out.rgb, "right.png": out.right_rgb})
         if rig.right is not None:
+            left, right = ((out.rgb, out.right_rgb) if camera_views is None
+                           else (camera_views["rgb.png"], camera_views["right.png"]))
             with tm.stage("stereo"):
-                st = simulate_stereo(spec.stereo, rig, out.rgb, out.right_rgb, gt.depth, tof,
+                st = simulate_stereo(spec.stereo, rig, left, right, gt.depth, tof,
                                      None if lidar is None else lidar.depth_rgb)
             members["right.png"] = out.right_rgb
             members["disp_sgm.exr"] = st.disp_sgm
@@ -233,10 +240,15 @@ class SampleProducer:
                 members["tofamp.exr"] = st.tof_amplitude
             if st.disp_lidar is not None:  # the 3-channel LiDAR/stereo variant's input
                 members["disp_lidar.exr"] = st.disp_lidar
-            sensors["stereo"] = {"fill_sgm": fill_ratio(st.disp_sgm), "fill_gt": fill_ratio(st.disp_gt)}
+            sensors["stereo"] = {"fill_sgm": fill_ratio(st.disp_sgm), "fill_gt": fill_ratio(st.disp_gt),
+                                 "sgbm_input": spec.stereo.sgbm_input}
         # post-render image stages: RGB views only, after every sensor has read the clean render
-        with tm.stage("camera_effects"):
-            members, camera_effects_meta = camera_effects_members(spec.camera_effects, members)
+        # (except SGBM with sgbm_input = "camera": the same effects, applied once, above)
+        if camera_views is None:
+            with tm.stage("camera_effects"):
+                members, camera_effects_meta = camera_effects_members(spec.camera_effects, members)
+        else:
+            members.update(camera_views)
         with tm.stage("adapt"):
             members, adapt_meta = adapt_members(spec.adapt, members, self.targets if spec.adapt.enabled else None)
 

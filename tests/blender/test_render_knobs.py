@@ -235,3 +235,40 @@ def test_real_build_behaves_like_the_mock():
         assert all(d.type in ("CPU", "OPTIX") for d in prefs.devices)
     finally:
         prefs.compute_device_type = before
+
+
+def _malloc_mb() -> float:
+    """Bytes the C heap holds in use (arena + mmapped chunks), glibc only."""
+    import ctypes
+
+    class MallInfo2(ctypes.Structure):
+        _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks",
+                                                   "fsmblks", "uordblks", "fordblks", "keepcost")]
+    try:
+        fn = ctypes.CDLL("libc.so.6").mallinfo2
+    except (OSError, AttributeError):
+        pytest.skip("needs glibc's mallinfo2")
+    fn.restype = MallInfo2
+    m = fn()
+    return (m.uordblks + m.hblkhd) / 2**20
+
+
+@pytest.mark.slow
+def test_swapped_images_are_allocated_when_the_scene_is_built():
+    """With persistent data the second sample must not allocate the other image set (was +3 x 4 MB at 512 px)."""
+    tex = 512  # 4 MB per RGBA float map, well above the heap's noise
+    live = LiveScene(GRID, tex, W, H, threads=1, samples=1, denoise=False, max_lights=2, shadow_px=32,
+                     persistent_data=True)
+    recipe = _recipe(True)
+    recipe.material.texture_px = tex
+    spec = make_spec(recipe, 0)
+    cm = crack_map(spec.crack, 64, spec.surface.size_m, measure=False)
+    args = (spec, make_rig(spec), surface_vertices(cm, GRID), material_maps(spec.material, cm), None)
+    try:
+        live.update(*args)
+        after_first = _malloc_mb()
+        live.update(*args)  # writes into the other image of every slot
+        live.update(*args)
+        assert _malloc_mb() - after_first < 2.0
+    finally:
+        live.close()
