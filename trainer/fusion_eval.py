@@ -1,7 +1,8 @@
 """``cracktrain fusion-eval``: the thesis-style fusion table on held-out shards (Tables 3.6-3.8).
 
 Rows: stereo, ToF (or LiDAR), fused with the max rule, fused with the softmax-
-weighted rule, and the max-fused map after BM3D; ``--all-filters`` adds BM3D
+weighted rule, the max-fused map after BM3D and, as its baseline, the ToF/LiDAR
+map after the same BM3D (a filter alone can beat an input); ``--all-filters`` adds BM3D
 before fusion and CLAHE before/after (the thesis's other settings). Columns:
 MSE, MAE, RMSE (px), % of pixels with error > 1/2/3/5 px, density. Per-scene
 metrics are averaged over scenes. By default the scenes are the checkpoint's
@@ -59,6 +60,8 @@ def evaluate_scene(model, cfg, scene, device, filters: dict[str, PostFilter],
         fused = (f.apply(base["fused_max"]) if f.stage == "after" else
                  fuse_scene(model, cfg, scene.x, device, f, scene.stereo_valid, stereo_holes)["fused_max"])
         rows[name] = disparity_metrics(fused, scene.gt)
+        if f.stage == "after" and f.method == "bm3d":  # the fair baseline: the same filter on the input alone
+            rows[f"{other} + BM3D after"] = disparity_metrics(f.apply(base["other"]), scene.gt)
     return rows
 
 

@@ -130,7 +130,7 @@ def test_a_few_training_steps_reduce_the_loss_then_eval_and_fuse(fusion_shards, 
 
     assert cli_main(["fusion-eval", "--ckpt", str(out / "last.pt"), "--no-progress", "--out", str(tmp_path / "ev")]) == 0
     table = capsys.readouterr().out
-    for row in ("| stereo |", "| ToF |", "| fused, max |", "| fused, weighted |", "| fused, max + BM3D after |"):
+    for row in ("| stereo |", "| ToF |", "| fused, max |", "| fused, weighted |", "| fused, max + BM3D after |", "| ToF + BM3D after |"):
         assert row in table
     assert (tmp_path / "ev" / "metrics.json").is_file()
 
