@@ -60,6 +60,13 @@ def _shape_check(shape: tuple[int, int], **maps: np.ndarray | None) -> None:
             raise FusionInputError(f"{name} is {np.asarray(m).shape[:2]}, stereo disparity is {shape}")
 
 
+def _lidar_channels(disp_lidar: np.ndarray, left: np.ndarray, right: np.ndarray,
+                    densify: str) -> tuple[np.ndarray, np.ndarray]:
+    """The LiDAR variant's channels 1 and 2: the densified LiDAR and the grey difference warped by it."""
+    do = interpolate_sparse(disp_lidar, densify)
+    return do, left_right_difference(left, right, do)
+
+
 def build_inputs(
     variant: str,
     disp_stereo: np.ndarray,
@@ -78,15 +85,15 @@ def build_inputs(
         raise FusionInputError(f"the {OTHER_NAME[variant]} disparity has no valid pixel")
     stereo_valid = valid_values(disp_stereo)
     ds = interpolate_sparse(disp_stereo, densify) if stereo_valid.any() else np.full(shape, -1, np.float32)
-    do = interpolate_sparse(disp_other, densify)
     if variant == "tof":
         if amplitude is None:
             raise FusionInputError("the tof variant needs the ToF amplitude")
+        do = interpolate_sparse(disp_other, densify)
         amp = fill_nearest(amplitude)
         lr = left_right_difference(left, right, ds)
         x = np.stack([ds, do, lr, np.maximum(amp, 0.0)], axis=-1)
     else:
-        lr = left_right_difference(left, right, do)
+        do, lr = _lidar_channels(disp_other, left, right, densify)
         x = np.stack([ds, do, lr], axis=-1)
     return FusionInputs(variant, x.astype(np.float32), stereo_valid)
 
@@ -101,7 +108,5 @@ def replace_lidar(inputs: FusionInputs, disp_lidar: np.ndarray, left: np.ndarray
     if not valid_values(disp_lidar).any():
         raise FusionInputError("the LiDAR disparity has no valid pixel")
     x = inputs.x.copy()
-    x[..., 1] = interpolate_sparse(disp_lidar, densify)
-    x[..., 2] = left_right_difference(left, right, x[..., 1])
+    x[..., 1], x[..., 2] = _lidar_channels(disp_lidar, left, right, densify)
     return FusionInputs("lidar", x, inputs.stereo_valid)
-
