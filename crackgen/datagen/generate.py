@@ -17,7 +17,8 @@ import time
 from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Mapping
 
-from crackgen.config.recipe import Recipe
+from crackgen.config.recipe import Recipe, RecipeError
+from crackgen.config.recipe_compat import resume_check
 from crackgen.datagen.backends import BACKENDS, Job, worker_versions
 from crackgen.datagen.tasks import ShardResult, ShardTask
 from crackgen.errors import CrackgenError
@@ -97,11 +98,13 @@ def _ours(name: str) -> bool:
 
 
 def prepare_output(recipe: Recipe, out: str, resume: bool, storage_options: Mapping[str, Any],
-                   versions: Mapping[str, str] | None = None) -> tuple[Manifest, list[ShardTask], list[str]]:
+                   versions: Mapping[str, str] | None = None,
+                   log: Callable[[str], None] | None = None) -> tuple[Manifest, list[ShardTask], list[str]]:
     """Check the output dir and return (manifest, shards to make, notes on shards being redone).
 
     Refuses a non-empty dir without ``--resume`` and a dir made from another recipe, so
-    nothing already made is lost or mixed.
+    nothing already made is lost or mixed. A dataset begun by a crackgen whose schema had
+    fewer fields resumes when the recipe is the same (``crackgen.config.recipe_compat``).
     """
     names = _listing(out, storage_options)
     plan = plan_shards(recipe)
@@ -117,16 +120,18 @@ def prepare_output(recipe: Recipe, out: str, resume: bool, storage_options: Mapp
         try:
             manifest.check_recipe(recipe.hash)
         except ManifestError as exc:
-            raise GenerateError(f"cannot resume: {exc}") from None
+            try:
+                note = resume_check(manifest.recipe_canonical, manifest.recipe_text, recipe)
+            except RecipeError as why:
+                raise GenerateError(f"cannot resume: {exc} ({why})") from None
+            (log or (lambda s: print(s, file=sys.stderr)))(note)
         manifest.storage_options = dict(storage_options)
     else:
         foreign = [n for n in (names or []) if not _ours(n)]
         if foreign:
             raise GenerateError(f"{out}: not a crackgen dataset (no manifest.json, holds {foreign[0]!r}); "
                                 "choose an empty --out")
-        manifest = Manifest(out, recipe_text=recipe.text, recipe_hash=recipe.hash, num_shards=recipe.num_shards,
-                            shard_size=recipe.dataset.shard_size, versions=versions,
-                            storage_options=storage_options)
+        manifest = Manifest.for_recipe(out, recipe, versions=versions, storage_options=storage_options)
     if not is_url(out):
         os.makedirs(local_path(out), exist_ok=True)
         clean_partials(out)
@@ -224,7 +229,7 @@ def generate(recipe: Recipe, opts: GenerateOptions, log: Callable[[str], None] |
     recipe = effective_recipe(recipe, opts.samples)
     check_inputs(recipe)
     manifest, todo, notes = prepare_output(recipe, opts.out, opts.resume, opts.storage_options,
-                                           versions=worker_versions())
+                                           versions=worker_versions(), log=log)
     summary = Summary(out=opts.out, skipped_shards=recipe.num_shards - len(todo), redone=notes)
     for n in notes:
         log(f"redoing {n}")

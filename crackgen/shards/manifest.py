@@ -164,6 +164,7 @@ class Manifest:
         *,
         recipe_text: str = "",
         recipe_hash: str = "",
+        recipe_canonical: Mapping[str, Any] | None = None,
         num_shards: int = 0,
         shard_size: int = 0,
         versions: Mapping[str, str] | None = None,
@@ -177,6 +178,8 @@ class Manifest:
         self.root = os.fspath(root)
         self.recipe_text = recipe_text
         self.recipe_hash = recipe_hash
+        # every recipe field, defaults filled: lets a newer crackgen tell added fields from changed ones
+        self.recipe_canonical = dict(recipe_canonical) if recipe_canonical is not None else None
         self.num_shards = int(num_shards)
         self.shard_size = int(shard_size)
         # library versions of this process plus what the caller adds (bpy comes from the worker side)
@@ -191,7 +194,8 @@ class Manifest:
     def for_recipe(cls, root: str | os.PathLike, recipe: Any, versions: Mapping[str, str] | None = None,
                    storage_options: Mapping[str, Any] | None = None) -> "Manifest":
         """A fresh manifest for a ``crackgen.config.recipe.Recipe`` (duck-typed: text, hash, num_shards, dataset)."""
-        return cls(root, recipe_text=recipe.text, recipe_hash=recipe.hash, num_shards=recipe.num_shards,
+        return cls(root, recipe_text=recipe.text, recipe_hash=recipe.hash,
+                   recipe_canonical=recipe.model_dump(mode="json"), num_shards=recipe.num_shards,
                    shard_size=recipe.dataset.shard_size, versions=versions,
                    storage_options=storage_options)
 
@@ -224,6 +228,7 @@ class Manifest:
             m = cls(
                 root,
                 recipe_text=str(data["recipe_text"]), recipe_hash=str(data["recipe_hash"]),
+                recipe_canonical=data.get("recipe_canonical"),  # absent in manifests before 2026-12-03
                 num_shards=int(data["num_shards"]), shard_size=int(data["shard_size"]),
                 generator_version=str(data["generator_version"]),
                 created=str(data["created"]),
@@ -247,6 +252,7 @@ class Manifest:
             "updated": _now(),
             "recipe_hash": self.recipe_hash,
             "recipe_text": self.recipe_text,
+            **({"recipe_canonical": self.recipe_canonical} if self.recipe_canonical is not None else {}),
             "num_shards": self.num_shards,
             "shard_size": self.shard_size,
             "num_samples_done": self.num_samples,

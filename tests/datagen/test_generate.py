@@ -266,6 +266,29 @@ def test_resume_refuses_other_recipe(reference, tmp_path):
     assert verify_dataset(str(out)) == []  # nothing touched
 
 
+def test_resume_across_a_schema_that_gained_a_field(reference, tmp_path):
+    """A dataset begun by a crackgen without ``stereo.sgbm_input``: other hash, same recipe -> resumes."""
+    import json
+
+    from crackgen.datagen.generate import GenerateError
+
+    out = tmp_path / "older"
+    shutil.copytree(reference["out"], out)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["recipe_canonical"]["stereo"]["sgbm_input"] == "clean"
+    del manifest["recipe_canonical"]["stereo"]["sgbm_input"]
+    manifest["recipe_hash"] = "0" * 64  # the older schema hashed to something else
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    said = []
+    summary = generate(parse_recipe(TINY), GenerateOptions(out=str(out), resume=True, progress=False), log=said.append)
+    assert summary.ok and summary.shards == 0 and summary.skipped_shards == 3
+    assert any("new fields at their defaults: stereo.sgbm_input" in s for s in said), said
+    other = parse_recipe(TINY.replace("seed = 11", "seed = 12"))
+    with pytest.raises(GenerateError, match=r"dataset.seed: 11 -> 12"):
+        generate(other, GenerateOptions(out=str(out), resume=True, progress=False))
+    assert verify_dataset(str(out)) == []
+
+
 # ---------------------------------------------------------------- failure policy (no rendering)
 
 class _Replay:
