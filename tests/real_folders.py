@@ -21,3 +21,14 @@ def write_real_folder(root: Path, n: int = 8) -> Path:
         cv2.imwrite(str(root / f"images/{i:03d}.png"), img)
         cv2.imwrite(str(root / f"masks/{i:03d}.png"), m)
     return root
+
+
+def train_tiny_model(base: Path) -> dict[str, Path]:
+    """A 2-step U-Net trained on a fresh 8-photo folder under ``base``: {"real", "ckpt", "base"}."""
+    from trainer.cli import main  # local: keeps this module importable without torch
+
+    real = write_real_folder(base / "real", n=8)
+    run = base / "run"
+    assert main(["seg", "--real", str(real), "--arch", "unet", "-b", "2", "--crop", "32", "-j", "0",
+                 "--no-progress", "--max-steps", "2", "--out", str(run)]) == 0
+    return {"real": real, "ckpt": run / "checkpoint.pt", "base": base}

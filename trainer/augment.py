@@ -95,7 +95,8 @@ def _geo(rgb: torch.Tensor, aux: torch.Tensor, size_hw: tuple[int, int]) -> tupl
 def augment(rgb: torch.Tensor, aux: torch.Tensor, cfg: SampleConfig, g: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
     """Random resize, rotation, flips, crop (joint); colour jitter (RGB); depth b/c (valid depth).
 
-    ``rgb`` is float [3,H,W] in [0,1]; ``aux`` is [3,H,W] = (depth, valid, mask).
+    ``rgb`` is float [3,H,W] in [0,1]; ``aux`` is [4,H,W] = (depth, valid, mask, ignore).
+    Rotation fills 0 (no depth, background, not ignored), as before the ignore channel existed.
     """
     H, W = rgb.shape[-2:]
     s = _u(g, cfg.scale_min, cfg.scale_max)
@@ -146,7 +147,9 @@ def augment(rgb: torch.Tensor, aux: torch.Tensor, cfg: SampleConfig, g: torch.Ge
 
 
 def sample_to_tensors(sample: dict[str, Any], cfg: SampleConfig, g: torch.Generator | None = None) -> dict[str, Any]:
-    """Numpy sample -> {"image": [C,H,W] float, "mask": [1,H,W] float 0/1, "key"}.
+    """Numpy sample -> {"image": [C,H,W] float, "mask": [1,H,W] float 0/1, "ignore": [1,H,W] 0/1, "key"}.
+
+    ``sample["ignore"]`` (uint8, > 127 = ignored; optional) marks pixels the loss skips.
 
     With ``g`` given the sample is augmented (training); without it, it is only
     resized (if ``cfg.size``) and normalised (evaluation/prediction).
@@ -164,7 +167,9 @@ def sample_to_tensors(sample: dict[str, Any], cfg: SampleConfig, g: torch.Genera
         d = v = np.zeros((H, W), np.float32)
     mask_np = sample.get("mask")
     m = np.zeros((H, W), np.float32) if mask_np is None else (mask_np > 127).astype(np.float32)
-    aux = torch.from_numpy(np.stack([d, v, m]))
+    ignore_np = sample.get("ignore")  # pixels left out of the loss (pseudo-labels' uncertain pixels)
+    ig = np.zeros((H, W), np.float32) if ignore_np is None else (ignore_np > 127).astype(np.float32)
+    aux = torch.from_numpy(np.stack([d, v, m, ig]))
     if cfg.size:
         s = cfg.size / min(H, W)
         rgb, aux = _geo(rgb, aux, (max(1, round(H * s)), max(1, round(W * s))))
@@ -176,7 +181,7 @@ def sample_to_tensors(sample: dict[str, Any], cfg: SampleConfig, g: torch.Genera
         x = torch.cat([x, aux[0:1]], 0)
     if n == 5:
         x = torch.cat([x, aux[1:2]], 0)
-    out = {"image": x.contiguous(), "mask": aux[2:3].contiguous(), "key": sample["key"]}
+    out = {"image": x.contiguous(), "mask": aux[2:3].contiguous(), "ignore": aux[3:4].contiguous(), "key": sample["key"]}
     if g is None and cfg.size and m.shape != tuple(aux.shape[-2:]):
         out["mask_full"] = torch.from_numpy(m)[None]  # evaluate at the native label resolution
     return out

@@ -31,6 +31,9 @@ def add_data_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--image-dir", default="images", help="image subfolder of a real folder")
     g.add_argument("--mask-dir", default="masks", help="mask subfolder (mask = value > 127)")
     g.add_argument("--mask-suffix", default="", help="mask file stem = image stem + suffix (e.g. _mask)")
+    g.add_argument("--ignore-dir", default="ignore",
+                   help="subfolder of per-pixel ignore masks (value > 127: no training loss there; used when it "
+                        "exists, e.g. in a `cracktrain pseudo-label` folder)")
     g.add_argument("--real-depth-dir", default=None, help="subfolder with depth or disparity maps (same stems)")
     g.add_argument("--real-depth-kind", choices=("depth", "disparity"), default="depth")
     g.add_argument("--real-depth-scale", type=float, default=1.0, help="raw depth units -> metres (0.001 for mm PNGs)")
@@ -105,7 +108,7 @@ def real_folder(args: argparse.Namespace, root: str | Path, stems: list[str] | N
         root, image_dir=args.image_dir, mask_dir=args.mask_dir, mask_suffix=args.mask_suffix,
         depth_dir=args.real_depth_dir if uses_depth else None, depth_kind=args.real_depth_kind,
         depth_scale=args.real_depth_scale, focal_px=args.focal_px, baseline_m=args.baseline_m,
-        stems=stems, require_masks=require_masks,
+        stems=stems, require_masks=require_masks, ignore_dir=getattr(args, "ignore_dir", "ignore"),
     )
 
 

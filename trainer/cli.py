@@ -24,6 +24,7 @@ def build_parser() -> argparse.ArgumentParser:
     from trainer.fusion_eval import add_fusion_eval_args
     from trainer.fusion_train import add_fusion_args
     from trainer.predict import add_predict_args
+    from trainer.pseudo_label import add_pseudo_label_args
     from trainer.sim2real import add_sim2real_args
     from trainer.split import add_split_args
     from trainer.train import add_seg_args
@@ -39,6 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
          "synthetic (+ adaptation) vs real vs mixed vs fine-tune, or the label-efficiency curve, on real test data"),
         ("adapt-bn", add_adapt_bn_args,
          "move a trained model's BatchNorm statistics to a folder of unlabeled site photos (AdaBN)"),
+        ("pseudo-label", add_pseudo_label_args,
+         "label a folder of unlabeled site photos with a model's confident predictions (self-training data)"),
         ("fusion", add_fusion_args, "train the ToF/LiDAR-stereo confidence CNN (thesis: Adadelta 0.01, batch 32, 128 px)"),
         ("fuse", add_fuse_args, "fuse a stereo and a ToF/LiDAR disparity file with a trained confidence CNN"),
         ("fusion-eval", add_fusion_eval_args, "thesis-style table: stereo, ToF/LiDAR, fused max/weighted, + BM3D"),
@@ -89,6 +92,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             r = run_adapt_bn(args)
             print(f"BN statistics of {r['source']} re-estimated on {r['batches']} batches of {r['crop']}-px crops "
                   f"from {r['photos']} photos in {r['target']}; wrote {args.out}")
+        elif args.command == "pseudo-label":
+            from trainer.pseudo_label import run_pseudo_label
+
+            r = run_pseudo_label(args)
+            print(f"pseudo-labelled {r['photos']} photos with {r['settings']['teacher']} "
+                  f"(target BN {'on' if r['settings']['target_bn'] else 'off'}, portion {r['settings']['portion']}): "
+                  f"crack {100 * r['crack_fraction']:.2f}% of pixels (p >= {r['threshold_crack']:.3f}), background "
+                  f"{100 * r['background_fraction']:.1f}%, ignored {100 * r['ignored_fraction']:.1f}%; wrote {args.out} "
+                  "(images/, masks/, ignore/, pseudo_labels.json); train on it with seg --real")
         elif args.command == "fusion":
             from trainer.fusion_train import main as fusion_main
 

@@ -9,6 +9,9 @@ real test set, P/R/F1/IoU at its best-F1 threshold and F1 at 0.5):
   (``--target``; with no folder, the *images* of the real training split, labels unused);
 - ``synthetic+bn``: the ``synthetic`` row's model with its BatchNorm statistics re-estimated on
   the unlabeled target photos (AdaBN, ``trainer.target_bn``): same weights, no extra steps;
+- ``synthetic+pseudo``: the ``synthetic`` row's model trained on for ``--self-train-steps`` on the
+  renders plus the target photos with its own confident predictions as labels (class-balanced
+  self-training, ``trainer.pseudo_label``; uncertain pixels ignored), no labels used;
 - ``real``: the real training split only;
 - ``mixed``: synthetic + real (real repeated N times, thesis rule);
 - ``finetune``: synthetic pretraining for ``--finetune-fraction`` of the budget (adapted
@@ -55,6 +58,7 @@ from trainer.curve import (
 from trainer.curve import write_csv as write_curve_csv
 from trainer.errors import TrainerInputError
 from trainer.evaluate import load_model
+from trainer.pseudo_label import PseudoSettings, write_pseudo_folder
 from trainer.site_adapt import targets_from_folder, targets_from_paths
 from trainer.sources import RealFolder, split_fraction
 from trainer.stream import SegStream
@@ -67,7 +71,8 @@ BASE_RUNS = ("synthetic", "real", "mixed", "finetune")
 ADAPT_RUNS = {"synthetic+fourier": "fourier", "synthetic+reinhard": "reinhard",
               "synthetic+histogram": "histogram", "synthetic+adapt": "fourier,reinhard,histogram"}
 BN_RUN = "synthetic+bn"  # target BN on the synthetic row's model
-TARGET_RUNS = (*ADAPT_RUNS, BN_RUN)  # rows that need --target
+PSEUDO_RUN = "synthetic+pseudo"  # self-training on the target photos from the synthetic row's model
+TARGET_RUNS = (*ADAPT_RUNS, BN_RUN, PSEUDO_RUN)  # rows that need --target
 
 
 def add_sim2real_args(p: argparse.ArgumentParser) -> None:
@@ -99,6 +104,12 @@ def add_sim2real_args(p: argparse.ArgumentParser) -> None:
                    help="finetune row: pretrain on the renders as they are, even with --target (default: adapted)")
     p.add_argument("--finetune-fraction", type=float, default=0.5,
                    help="finetune row: share of --max-steps spent on synthetic pretraining")
+    p.add_argument("--self-train-steps", type=int, default=None,
+                   help="synthetic+pseudo row: steps on renders + pseudo-labelled target photos (default --max-steps / 2)")
+    p.add_argument("--pseudo-portion", type=float, default=0.5,
+                   help="synthetic+pseudo row: share of the predicted crack pixels kept as labels (rest ignored)")
+    p.add_argument("--pseudo-background-portion", type=float, default=None,
+                   help="synthetic+pseudo row: share of the predicted background kept (default --pseudo-portion)")
     p.add_argument("--curve", default=None, metavar="N,N,...", help="run the label-efficiency curve at these photo counts")
     p.add_argument("--repeats", type=int, default=3, help="curve: repeats (different nested subsets and seeds)")
     p.add_argument("--curve-steps", type=int, default=None, help="curve: steps per model on N photos (default --max-steps)")
@@ -203,6 +214,8 @@ def run_row(name: str, args: argparse.Namespace, out: Path, train_stems: list[st
         return train_and_score(seg_args(args, out / name, args.synthetic, None, None), test, args, device)
     if name == BN_RUN:
         return target_bn_row(args, out, targets, test, device)
+    if name == PSEUDO_RUN:
+        return pseudo_label_row(args, out, targets, test, device)
     if args.finetune_lr is not None and not args.finetune_lr > 0:
         raise TrainerInputError(f"--finetune-lr must be > 0, got {args.finetune_lr}")
     if args.pretrained:
@@ -255,6 +268,33 @@ def target_bn_row(args: argparse.Namespace, out: Path, targets: tuple[str, ...] 
             "best": s["best"], "at_0.5": s["at_threshold"], "target_bn": record}
 
 
+def pseudo_label_row(args: argparse.Namespace, out: Path, targets: tuple[str, ...] | None, test: RealFolder,
+                     device: torch.device) -> dict[str, Any]:
+    """The ``synthetic`` row's model (trained here unless finished), then ``--self-train-steps`` on the renders
+    plus the target photos pseudo-labelled by that model (``trainer.pseudo_label``)."""
+    assert targets is not None
+    steps = args.self_train_steps if args.self_train_steps is not None else max(1, args.max_steps // 2)
+    if steps <= 0:
+        raise TrainerInputError(f"--self-train-steps must be > 0, got {steps}")
+    base = seg_args(args, out / "synthetic", args.synthetic, None, None)
+    info = train_or_reuse(base)
+    teacher = out / "synthetic" / "checkpoint.pt"
+    t0 = time.perf_counter()
+    settings = PseudoSettings(teacher=str(teacher), portion=args.pseudo_portion,
+                              background_portion=args.pseudo_background_portion, batch_size=args.batch_size,
+                              crop=args.crop, seed=args.seed)
+    labels = out / PSEUDO_RUN / "labels"
+    record = write_pseudo_folder(targets, labels, settings, device, workers=args.workers,
+                                 progress=not args.no_progress)
+    ns = seg_args(args, out / PSEUDO_RUN / "student", args.synthetic, str(labels), None, init=str(teacher),
+                  max_steps=steps, image_dir="images", mask_dir="masks", mask_suffix="", ignore_dir="ignore",
+                  real_depth_dir=None)
+    res = train_and_score(ns, test, args, device)
+    res["train_seconds"] = round(info["seconds"] + time.perf_counter() - t0, 1)
+    res.update({"steps": info["step"] + steps, "self_train_steps": steps, "pseudo_labels": record})
+    return res
+
+
 def run_sim2real(args: argparse.Namespace) -> dict[str, Any]:
     if args.pretrained and not Path(args.pretrained).is_file():
         raise TrainerInputError(f"--pretrained {args.pretrained} does not exist")
@@ -275,6 +315,7 @@ def run_sim2real(args: argparse.Namespace) -> dict[str, Any]:
              "batch_size": args.batch_size, "crop": args.crop, "seed": args.seed, "real_train": args.real,
              "real_train_images": n_real, "real_test": test_root, "real_test_images": len(test),
              "synthetic": args.synthetic, "target": describe_target(args, targets), "runs": results}
+    results.update(earlier_rows(out, table, runs))
     for i, name in enumerate(runs, 1):
         log.info("sim2real: row %d/%d '%s'", i, len(runs), name)
         results[name] = run_row(name, args, out, train_stems, targets, test, device)
@@ -282,6 +323,26 @@ def run_sim2real(args: argparse.Namespace) -> dict[str, Any]:
         (out / "sim2real.json").write_text(json.dumps(table, indent=2))
         (out / "sim2real.md").write_text("\n".join(rows_markdown(args, table, test_root, len(test))) + "\n")
     return table
+
+
+def earlier_rows(out: Path, table: dict[str, Any], runs: list[str]) -> dict[str, Any]:
+    """Rows of an earlier comparison in ``out`` with the same settings that this run does not redo, so that
+    adding a row (``--runs X``) keeps the table's other rows. Other settings: the old table is replaced."""
+    path = out / "sim2real.json"
+    if not path.is_file():
+        return {}
+    old = json.loads(path.read_text())
+    skip = ("runs", "target", "synthetic")  # these two only concern the rows that use them
+    if {k: v for k, v in old.items() if k not in skip} != {k: v for k, v in table.items() if k not in skip}:
+        log.info("sim2real: %s was made with other settings; its rows are replaced", path)
+        return {}
+    kept = {k: v for k, v in old.get("runs", {}).items() if k not in runs}
+    for key, uses in (("synthetic", lambda k: k != "real"), ("target", lambda k: k in TARGET_RUNS or k == "finetune")):
+        if table[key] is None:
+            table[key] = old.get(key)
+        elif old.get(key) is not None and table[key] != old[key]:  # rows made from other data are not comparable
+            kept = {k: v for k, v in kept.items() if not uses(k)}
+    return kept
 
 
 def describe_target(args: argparse.Namespace, targets: tuple[str, ...] | None) -> str | None:

@@ -6,10 +6,13 @@ Both sources hand out the same plain sample dict, so everything after them
     {"key": str, "rgb": uint8 HxWx3, "mask": uint8 HxW 0/255,
      "depth": float32 HxW metres with -1 = none, or None}
 
+(real folders add "ignore": uint8 HxW 0/255 or None).
+
 Real folders: ``ROOT/images/STEM.jpg`` + ``ROOT/masks/STEM[suffix].png``
 (+ optional ``ROOT/<depth_dir>/STEM.{png,tif,exr,pfm,npy}`` holding depth or
-disparity; see ``trainer.depth`` for the conversion and alignment). Subfolder
-names and the mask suffix are configurable.
+disparity; see ``trainer.depth`` for the conversion and alignment; + optional
+``ROOT/ignore/STEM[suffix].png``, pixels the training loss skips, as written by
+``cracktrain pseudo-label``). Subfolder names and the mask suffix are configurable.
 
 Shards: WebDataset tars as written by ``crackgen generate``; the key list of
 each shard is read from the tar headers only (no decoding), so splits and
@@ -82,7 +85,9 @@ class RealFolder:
     baseline_m: float | None = None
     stems: Sequence[str] | None = None
     require_masks: bool = True
+    ignore_dir: str | None = "ignore"  # per-pixel "not labelled" masks (value > 127), used when the subfolder exists
     _images: dict[str, Path] = field(default_factory=dict, init=False, repr=False)
+    _has_ignore: bool = field(default=False, init=False, repr=False)
 
     def __post_init__(self) -> None:
         self.root = Path(self.root)
@@ -100,6 +105,7 @@ class RealFolder:
         self._images = found
         if self.require_masks and not (self.root / self.mask_dir).is_dir():
             raise TrainerInputError(f"real folder {self.root}: no '{self.mask_dir}/' subfolder")
+        self._has_ignore = bool(self.require_masks and self.ignore_dir and (self.root / self.ignore_dir).is_dir())
         if self.depth_dir is not None and not (self.root / self.depth_dir).is_dir():
             raise TrainerInputError(f"real folder {self.root}: no '{self.depth_dir}/' subfolder")
         if self.depth_kind not in ("depth", "disparity"):
@@ -139,6 +145,13 @@ class RealFolder:
             mask = read_mask(mp)
             if mask.shape != rgb.shape[:2]:
                 raise TrainerInputError(f"{mp}: mask size {mask.shape[::-1]} != image size {rgb.shape[1::-1]} ({img_path.name})")
+        ignore = None
+        if self._has_ignore:
+            ip = self._find(str(self.ignore_dir), stem + self.mask_suffix, (".png", ".bmp", ".tif", ".tiff"))
+            ignore = read_mask(ip)
+            if ignore.shape != rgb.shape[:2]:
+                raise TrainerInputError(f"{ip}: ignore mask size {ignore.shape[::-1]} != image size "
+                                        f"{rgb.shape[1::-1]} ({img_path.name})")
         depth = None
         if self.depth_dir is not None:
             dp = self._find(self.depth_dir, stem, DEPTH_EXTS)
@@ -148,7 +161,7 @@ class RealFolder:
             else:
                 depth = scaled_depth(raw, self.depth_scale)
             depth = align_to_rgb(depth, rgb.shape[:2])
-        return {"key": stem, "rgb": rgb, "mask": mask, "depth": depth, "path": str(img_path)}
+        return {"key": stem, "rgb": rgb, "mask": mask, "ignore": ignore, "depth": depth, "path": str(img_path)}
 
 
 # --------------------------------------------------------------------- shards

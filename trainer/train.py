@@ -47,7 +47,7 @@ from trainer.builders import (
 )
 from trainer.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from trainer.errors import TrainerInputError
-from trainer.losses import LOSSES, make_loss
+from trainer.losses import LOSSES, Loss, make_loss
 from trainer.metrics import ConfusionHistogram
 from trainer.models import ARCHS, build_model
 from trainer.site_adapt import SiteAdaptation, parse_band, targets_from_folder
@@ -175,7 +175,7 @@ class Run:
     optimizer: torch.optim.Optimizer
     lr_scheduler: torch.optim.lr_scheduler.LRScheduler
     scaler: torch.amp.GradScaler
-    criterion: Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
+    criterion: Loss
     logger: _Logger
     progress: bool
     steps_per_epoch: int
@@ -433,7 +433,11 @@ def train_step(run: Run, batch: dict[str, Any]) -> float:
         x = x.contiguous(memory_format=torch.channels_last)
     with torch.autocast(device_type=run.device.type, dtype=torch.float16, enabled=run.amp):
         logits = run.model(x)
-    loss = run.criterion(logits, y)
+    ignore = batch.get("ignore")
+    if ignore is not None and bool(ignore.any()):  # pseudo-labels: uncertain pixels carry no loss
+        loss = run.criterion(logits, y, 1.0 - ignore.to(run.device, non_blocking=True))
+    else:
+        loss = run.criterion(logits, y)
     run.optimizer.zero_grad(set_to_none=True)
     run.scaler.scale(loss).backward()
     run.scaler.step(run.optimizer)

@@ -159,3 +159,17 @@ def test_finetune_row_from_a_pretrained_synthetic_model_spends_every_step_on_rea
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "nope.pt" in err[0]
     assert json.loads((out / "sim2real.json").read_text())["runs"]["finetune"] == ft  # the finished row is kept
+
+
+def test_a_second_run_adds_rows_and_keeps_the_earlier_ones(data, tmp_path):
+    out = tmp_path / "s2r"
+    base = ["sim2real", "--real", str(data["real"]), "--real-test-fraction", "0.25", "--out", str(out), *COMMON]
+    assert main([*base, "--max-steps", "2", "--runs", "real"]) == 0
+    first = json.loads((out / "sim2real.json").read_text())["runs"]["real"]
+    assert main([*base, "--max-steps", "2", "--synthetic", str(data["shards"]), "--runs", "synthetic"]) == 0
+    assert json.loads((out / "sim2real.json").read_text())["runs"] == {"real": first} | {
+        "synthetic": json.loads((out / "sim2real.json").read_text())["runs"]["synthetic"]}
+    assert "| real |" in (out / "sim2real.md").read_text()
+    # other settings (budget): the earlier rows are not comparable and are replaced
+    assert main([*base, "--max-steps", "3", "--synthetic", str(data["shards"]), "--runs", "synthetic"]) == 0
+    assert list(json.loads((out / "sim2real.json").read_text())["runs"]) == ["synthetic"]

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 import torch
-from real_folders import write_real_folder
+from real_folders import train_tiny_model
 from synthetic_shards import write_shards
 
 from trainer.adapt_bn import adapt_checkpoint
@@ -86,12 +86,7 @@ def test_photo_smaller_than_the_crop_is_one_line(tmp_path):
 
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
-    base = tmp_path_factory.mktemp("tbn")
-    real = write_real_folder(base / "real", n=8)
-    run = base / "run"
-    assert main(["seg", "--real", str(real), "--arch", "unet", "-b", "2", "--crop", "32", "-j", "0",
-                 "--no-progress", "--max-steps", "2", "--out", str(run)]) == 0
-    return {"real": real, "ckpt": run / "checkpoint.pt", "base": base}
+    return train_tiny_model(tmp_path_factory.mktemp("tbn"))
 
 
 def test_adapt_checkpoint_writes_a_new_model_and_leaves_the_source(trained, tmp_path):
