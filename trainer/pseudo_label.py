@@ -38,7 +38,8 @@ from trainer.imageio import read_rgb
 from trainer.target_bn import DEFAULT_BATCHES, adapt_bn_to_photos
 
 RECORD = "pseudo_labels.json"
-QUANTILE_SAMPLE = 2_000_000  # confidences per class used for the quantile (a strided subsample)
+QUANTILE_SAMPLE = 2_000_000  # pixels (about) used for the class quantiles: a strided subsample of every photo
+PROB_DIR = "_prob"  # the teacher's probabilities between the two passes (removed before the folder is finished)
 
 
 @dataclass(frozen=True)
@@ -99,6 +100,11 @@ def label_maps(prob: np.ndarray, t_crack: float, t_background: float) -> tuple[n
     return (crack * np.uint8(255)), (~(crack | background) * np.uint8(255))
 
 
+def _write_png(path: Path, img: np.ndarray) -> None:
+    if not cv2.imwrite(str(path), img):
+        raise TrainerInputError(f"pseudo-label: cannot write {path}")
+
+
 def _unique_stems(photos: Sequence[str | Path]) -> list[Path]:
     paths = [Path(p) for p in photos]
     seen: dict[str, Path] = {}
@@ -145,27 +151,33 @@ def write_pseudo_folder(photos: Sequence[str | Path], out: str | Path, settings:
         adapt_bn_to_photos(model, paths, cfg, device, crop=crop, batches=settings.bn_batches,
                            batch_size=settings.batch_size, workers=workers, seed=settings.seed)
     model.eval()
-    probs = [predict_probability(model, cfg, read_rgb(p), device).astype(np.float16)
-             for p in tqdm(paths, desc="pseudo-label: predict", disable=not progress)]
-    t_crack, t_back = class_thresholds([p.astype(np.float32) for p in probs], settings.portion,
-                                       settings.background_portion)
     tmp = out.with_name(out.name + ".partial")
     if tmp.exists():
         shutil.rmtree(tmp)
-    for sub in ("images", "masks", "ignore"):
+    for sub in ("images", "masks", "ignore", PROB_DIR):
         (tmp / sub).mkdir(parents=True)
+    # pass 1: probabilities to disk (16-bit PNG) and a bounded subsample for the class quantiles,
+    # so memory does not grow with the number of photos (a site may have thousands)
+    sample: list[np.ndarray] = []
+    for path in tqdm(paths, desc="pseudo-label: predict", disable=not progress):
+        q = np.round(predict_probability(model, cfg, read_rgb(path), device) * 65535.0).astype(np.uint16)
+        _write_png(tmp / PROB_DIR / f"{path.stem}.png", q)
+        sample.append(q.ravel()[:: max(1, q.size * len(paths) // QUANTILE_SAMPLE)].astype(np.float32) / 65535.0)
+    t_crack, t_back = class_thresholds(sample, settings.portion, settings.background_portion)
+    del sample
+    # pass 2: labels from the stored probabilities
     n_px = n_crack = n_ignore = n_pred = 0
-    for path, prob16 in zip(paths, probs):
-        prob = prob16.astype(np.float32)
+    for path in tqdm(paths, desc="pseudo-label: write", disable=not progress):
+        prob = cv2.imread(str(tmp / PROB_DIR / f"{path.stem}.png"), cv2.IMREAD_UNCHANGED).astype(np.float32) / 65535.0
         mask, ignore = label_maps(prob, t_crack, t_back)
         shutil.copy2(path, tmp / "images" / path.name)
-        for sub, img in (("masks", mask), ("ignore", ignore)):
-            if not cv2.imwrite(str(tmp / sub / f"{path.stem}.png"), img):
-                raise TrainerInputError(f"pseudo-label: cannot write {tmp / sub / path.stem}.png")
+        _write_png(tmp / "masks" / f"{path.stem}.png", mask)
+        _write_png(tmp / "ignore" / f"{path.stem}.png", ignore)
         n_px += prob.size
         n_crack += int((mask > 0).sum())
         n_ignore += int((ignore > 0).sum())
         n_pred += int((prob >= 0.5).sum())
+    shutil.rmtree(tmp / PROB_DIR)
     record = {"settings": asdict(settings), "photos": len(paths), "crop": crop,
               "threshold_crack": t_crack, "threshold_background": t_back,
               "predicted_crack_fraction": n_pred / n_px, "crack_fraction": n_crack / n_px,
