@@ -245,7 +245,8 @@ def run_row(name: str, args: argparse.Namespace, out: Path, train_stems: list[st
 def finetune_pretrained_row(args: argparse.Namespace, out: Path, name: str, stems: list[str] | None,
                             test: RealFolder, device: torch.device) -> dict[str, Any]:
     """``--pretrained CKPT`` fine-tuned on the real split for all ``--max-steps``."""
-    pre_step = int(load_checkpoint(args.pretrained).get("step", 0))
+    pre = load_checkpoint(args.pretrained)
+    pre_step = int(pre.get("step", 0)) + int(pre.get("args", {}).get("init_steps", 0) or 0)  # with its own --init
     lr = args.finetune_lr or args.lr
     ft = seg_args(args, out / name, None, args.real, stems, init=str(args.pretrained), lr=lr)
     res = train_and_score(ft, test, args, device)

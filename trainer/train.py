@@ -264,6 +264,8 @@ def load_init_weights(path: str, bare: torch.nn.Module, args: argparse.Namespace
     except RuntimeError as exc:
         first = str(exc).strip().splitlines()[0]
         raise TrainerInputError(f"--init {path}: weights do not fit this model ({first})") from None
+    # provenance: every step the starting weights have seen, through chains of --init (stored with the args)
+    args.init_steps = int(ckpt.get("step", 0)) + int(src.get("init_steps", 0) or 0)
 
 
 def precise_bn_batches(args: argparse.Namespace) -> int:
@@ -538,6 +540,8 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
     criterion = make_loss(args.loss)
     if getattr(args, "init", None) and ckpt is None:
         load_init_weights(args.init, bare, args)
+    elif ckpt is not None and "init_steps" in ckpt.get("args", {}):  # a resumed fine-tune keeps its provenance
+        args.init_steps = ckpt["args"]["init_steps"]
     state = restore(ckpt, bare, opt, sched, scaler, amp, weights_only=args.test_only)
     run = Run(args=args, out=out, device=device, amp=amp, main_proc=main_proc, world=world, cfg=train_ds.cfg,
               model=model, bare=bare, optimizer=opt, lr_scheduler=sched, scaler=scaler, criterion=criterion,

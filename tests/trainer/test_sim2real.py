@@ -173,3 +173,19 @@ def test_a_second_run_adds_rows_and_keeps_the_earlier_ones(data, tmp_path):
     # other settings (budget): the earlier rows are not comparable and are replaced
     assert main([*base, "--max-steps", "3", "--synthetic", str(data["shards"]), "--runs", "synthetic"]) == 0
     assert list(json.loads((out / "sim2real.json").read_text())["runs"]) == ["synthetic"]
+
+
+def test_pretrain_steps_count_a_chain_of_init_trainings(data, tmp_path):
+    """A second cycle (seg --init) on a synthetic model: the fine-tune row reports every synthetic step."""
+    syn = tmp_path / "syn"
+    assert main(["seg", "--data", str(data["shards"]), "--max-steps", "2", "--out", str(syn), *COMMON]) == 0
+    more = tmp_path / "more"
+    assert main(["seg", "--data", str(data["shards"]), "--init", str(syn / "checkpoint.pt"), "--max-steps", "3",
+                 "--out", str(more), *COMMON]) == 0
+    assert load_checkpoint(more / "checkpoint.pt")["args"]["init_steps"] == 2
+    out = tmp_path / "ft"
+    assert main(["sim2real", "--pretrained", str(more / "checkpoint.pt"), "--real", str(data["real"]),
+                 "--real-test-fraction", "0.25", "--max-steps", "2", "--runs", "finetune", "--out", str(out), *COMMON]) == 0
+    ft = json.loads((out / "sim2real.json").read_text())["runs"]["finetune"]
+    assert ft["pretrain_steps"] == 5  # 2 + 3
+    assert load_checkpoint(out / "finetune" / "checkpoint.pt")["args"]["init_steps"] == 5
