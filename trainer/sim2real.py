@@ -315,7 +315,8 @@ def run_sim2real(args: argparse.Namespace) -> dict[str, Any]:
     cfg = sample_config_from_args(args)
     table = {"arch": args.arch, "channels": cfg.channels, "depth": args.depth, "depth_norm": cfg.depth_norm,
              "mask_member": args.mask_member or "mask.png", "max_steps": args.max_steps,
-             "batch_size": args.batch_size, "crop": args.crop, "seed": args.seed, "real_train": args.real,
+             "batch_size": args.batch_size, "crop": args.crop, "seed": args.seed, "lr": args.lr,
+             "lr_scheduler": args.lr_scheduler, "loss": args.loss, "real_train": args.real,
              "real_train_images": n_real, "real_test": test_root, "real_test_images": len(test),
              "synthetic": args.synthetic, "target": describe_target(args, targets), "runs": results}
     results.update(earlier_rows(out, table, runs))

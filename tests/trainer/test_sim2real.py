@@ -173,6 +173,8 @@ def test_a_second_run_adds_rows_and_keeps_the_earlier_ones(data, tmp_path):
     # other settings (budget): the earlier rows are not comparable and are replaced
     assert main([*base, "--max-steps", "3", "--synthetic", str(data["shards"]), "--runs", "synthetic"]) == 0
     assert list(json.loads((out / "sim2real.json").read_text())["runs"]) == ["synthetic"]
+    assert main([*base, "--max-steps", "3", "--lr-scheduler", "cosine", "--runs", "real"]) == 0  # other schedule
+    assert list(json.loads((out / "sim2real.json").read_text())["runs"]) == ["real"]
 
 
 def test_pretrain_steps_count_a_chain_of_init_trainings(data, tmp_path):
