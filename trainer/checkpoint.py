@@ -56,3 +56,8 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     if not isinstance(ckpt, dict) or any(k not in ckpt for k in REQUIRED):
         raise TrainerInputError(f"checkpoint {path} is not a cracktrain checkpoint (needs keys {REQUIRED})")
     return ckpt
+
+
+def steps_seen(ckpt: dict[str, Any]) -> int:
+    """Every step a checkpoint's weights have seen: its own, plus those of its ``--init`` chain."""
+    return int(ckpt.get("step", 0)) + int(ckpt.get("args", {}).get("init_steps", 0) or 0)

@@ -13,9 +13,10 @@ import json
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
-from trainer.augment import SampleConfig
+from trainer.augment import SampleConfig, sample_to_tensors
 from trainer.builders import add_data_args, eval_loader, real_folder, shard_source
 from trainer.checkpoint import load_checkpoint
 from trainer.errors import TrainerInputError
@@ -48,6 +49,19 @@ def load_model(path: str | Path, device: torch.device) -> tuple[SegModel, Sample
     except RuntimeError as exc:
         raise TrainerInputError(f"checkpoint {path}: weights do not fit {ckpt['args']['arch']} ({str(exc)[:120]})") from None
     return model.to(device).eval(), cfg, ckpt["args"]
+
+
+def predict_probability(model: torch.nn.Module, cfg: SampleConfig, sample: dict[str, Any],
+                        device: torch.device) -> np.ndarray:
+    """Crack probability of one sample at the native size of its RGB (float32 HxW), as the model's sample
+    config prepares it (resize, depth normalisation)."""
+    t = sample_to_tensors(sample, cfg)
+    with torch.no_grad():
+        logits = model(t["image"][None].to(device))
+    H, W = sample["rgb"].shape[:2]
+    if logits.shape[-2:] != (H, W):
+        logits = torch.nn.functional.interpolate(logits, size=(H, W), mode="bilinear", align_corners=False)
+    return torch.sigmoid(logits)[0, 0].float().cpu().numpy()
 
 
 def _inherit_depth(args: argparse.Namespace, train_args: dict[str, Any], cfg: SampleConfig) -> None:

@@ -34,10 +34,9 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from trainer.augment import sample_to_tensors
 from trainer.builders import add_data_args, real_folder
 from trainer.errors import TrainerInputError
-from trainer.evaluate import _inherit_depth, load_model
+from trainer.evaluate import _inherit_depth, load_model, predict_probability
 from trainer.sources import _SHARD_MEMBER
 
 log = logging.getLogger(__name__)
@@ -186,13 +185,7 @@ def run_predict(args: argparse.Namespace) -> PredictResult:
             result.skipped.append({"image": str(image_path(item)), "reason": str(exc)})
             continue
         key = sample["key"]
-        t = sample_to_tensors(sample, cfg)
-        with torch.no_grad():
-            logits = model(t["image"][None].to(device))
-        H, W = sample["rgb"].shape[:2]
-        if logits.shape[-2:] != (H, W):
-            logits = torch.nn.functional.interpolate(logits, size=(H, W), mode="bilinear", align_corners=False)
-        prob = torch.sigmoid(logits)[0, 0].cpu().numpy()
+        prob = predict_probability(model, cfg, sample, device)
         mask = (prob >= args.threshold).astype(np.uint8) * 255
         cv2.imwrite(str(out / f"{key}_prob.png"), np.round(prob * 255).astype(np.uint8))
         cv2.imwrite(str(out / f"{key}_mask.png"), mask)

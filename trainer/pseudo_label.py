@@ -31,9 +31,8 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from trainer.augment import SampleConfig, sample_to_tensors
 from trainer.errors import TrainerInputError
-from trainer.evaluate import load_model
+from trainer.evaluate import load_model, predict_probability
 from trainer.imageio import read_rgb
 from trainer.target_bn import DEFAULT_BATCHES, adapt_bn_to_photos
 
@@ -60,16 +59,6 @@ class PseudoSettings:
             raise TrainerInputError(f"--portion must be in (0, 1], got {self.portion}")
         if self.background_portion is not None and not 0.0 < self.background_portion <= 1.0:
             raise TrainerInputError(f"--background-portion must be in (0, 1], got {self.background_portion}")
-
-
-def predict_probability(model: torch.nn.Module, cfg: SampleConfig, rgb: np.ndarray, device: torch.device) -> np.ndarray:
-    """Crack probability of one photo at its native size (float32 HxW)."""
-    t = sample_to_tensors({"key": "", "rgb": rgb, "mask": None}, cfg)
-    with torch.no_grad():
-        logits = model(t["image"][None].to(device))
-    if logits.shape[-2:] != rgb.shape[:2]:
-        logits = torch.nn.functional.interpolate(logits, size=rgb.shape[:2], mode="bilinear", align_corners=False)
-    return torch.sigmoid(logits)[0, 0].float().cpu().numpy()
 
 
 def _quantile(values: list[np.ndarray], q: float) -> float:
@@ -160,7 +149,7 @@ def write_pseudo_folder(photos: Sequence[str | Path], out: str | Path, settings:
     # so memory does not grow with the number of photos (a site may have thousands)
     sample: list[np.ndarray] = []
     for path in tqdm(paths, desc="pseudo-label: predict", disable=not progress):
-        q = np.round(predict_probability(model, cfg, read_rgb(path), device) * 65535.0).astype(np.uint16)
+        q = np.round(predict_probability(model, cfg, {"key": path.stem, "rgb": read_rgb(path), "mask": None}, device) * 65535.0).astype(np.uint16)
         _write_png(tmp / PROB_DIR / f"{path.stem}.png", q)
         sample.append(q.ravel()[:: max(1, q.size * len(paths) // QUANTILE_SAMPLE)].astype(np.float32) / 65535.0)
     t_crack, t_back = class_thresholds(sample, settings.portion, settings.background_portion)
@@ -218,5 +207,5 @@ def run_pseudo_label(args: argparse.Namespace) -> dict[str, Any]:
                                progress=not args.no_progress)
 
 
-__all__ = ["PseudoSettings", "class_thresholds", "label_maps", "predict_probability", "write_pseudo_folder",
+__all__ = ["PseudoSettings", "class_thresholds", "label_maps", "write_pseudo_folder",
            "finished_record", "add_pseudo_label_args", "run_pseudo_label", "RECORD"]

@@ -44,7 +44,7 @@ import torch
 
 from trainer.adapt_bn import adapt_checkpoint
 from trainer.builders import add_data_args, eval_loader, real_folder, sample_config_from_args
-from trainer.checkpoint import load_checkpoint
+from trainer.checkpoint import load_checkpoint, steps_seen
 from trainer.curve import (
     CurvePoint,
     headline,
@@ -245,8 +245,7 @@ def run_row(name: str, args: argparse.Namespace, out: Path, train_stems: list[st
 def finetune_pretrained_row(args: argparse.Namespace, out: Path, name: str, stems: list[str] | None,
                             test: RealFolder, device: torch.device) -> dict[str, Any]:
     """``--pretrained CKPT`` fine-tuned on the real split for all ``--max-steps``."""
-    pre = load_checkpoint(args.pretrained)
-    pre_step = int(pre.get("step", 0)) + int(pre.get("args", {}).get("init_steps", 0) or 0)  # with its own --init
+    pre_step = steps_seen(load_checkpoint(args.pretrained))  # with its own --init chain
     lr = args.finetune_lr or args.lr
     ft = seg_args(args, out / name, None, args.real, stems, init=str(args.pretrained), lr=lr)
     res = train_and_score(ft, test, args, device)

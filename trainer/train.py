@@ -45,7 +45,7 @@ from trainer.builders import (
     sample_config_from_args,
     shard_source,
 )
-from trainer.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
+from trainer.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state, steps_seen
 from trainer.errors import TrainerInputError
 from trainer.losses import LOSSES, Loss, make_loss
 from trainer.metrics import ConfusionHistogram
@@ -265,7 +265,7 @@ def load_init_weights(path: str, bare: torch.nn.Module, args: argparse.Namespace
         first = str(exc).strip().splitlines()[0]
         raise TrainerInputError(f"--init {path}: weights do not fit this model ({first})") from None
     # provenance: every step the starting weights have seen, through chains of --init (stored with the args)
-    args.init_steps = int(ckpt.get("step", 0)) + int(src.get("init_steps", 0) or 0)
+    args.init_steps = steps_seen(ckpt)
 
 
 def precise_bn_batches(args: argparse.Namespace) -> int:
