@@ -463,6 +463,11 @@ class CameraEffectsSection(Section):
                                  "image's mean luma to a drawn target, before any exposure error (0..1)")
     auto_exposure_luma: _t(1, 254) = _d({"min": 100.0, "max": 180.0},
                                         "auto exposure: target mean luma of the sRGB image (0-255)")
+    sharpen: float = Field(0.0, ge=0, le=1, description="probability of in-camera sharpening: an unsharp mask on the "
+                           "luma before JPEG (0..1)")
+    sharpen_amount: _t(0, 10) = _d({"min": 0.5, "max": 2.0}, "sharpening gain on the luma detail (unitless; 0 = none)")
+    sharpen_sigma_px: _t(0, 20, lo_open=True) = _d({"min": 0.7, "max": 1.5},
+                                                   "sharpening Gaussian sigma (px): the detail scale boosted")
 
 
 class LabelSection(Section):

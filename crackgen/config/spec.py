@@ -293,6 +293,8 @@ class CameraEffectsSpec:
     jpeg_quality: int = 0
     seed: int = 0  # seeds the sensor noise
     auto_exposure_luma: float = 0.0  # target mean sRGB luma (0-255) of auto exposure
+    sharpen_amount: float = 0.0  # unsharp-mask gain on the luma detail
+    sharpen_sigma_px: float = 0.0  # unsharp-mask Gaussian sigma (px)
 
 
 @dataclass
@@ -601,7 +603,7 @@ def draw_adapt(a: AdaptSection, rng: np.random.Generator) -> AdaptSpec:
 
 # The order the camera-effects stage applies them (crackgen.postrender.camera_effects.EFFECTS, tested equal).
 CAMERA_EFFECTS_ORDER = ("auto_exposure", "exposure", "white_balance", "tone", "vignetting", "defocus", "motion_blur",
-                        "noise", "jpeg")
+                        "noise", "sharpen", "jpeg")
 
 
 def draw_camera_effects(c: CameraEffectsSection, rng: np.random.Generator) -> CameraEffectsSpec:
@@ -629,6 +631,8 @@ def draw_camera_effects(c: CameraEffectsSection, rng: np.random.Generator) -> Ca
     seed = _seed(rng)
     # appended after the seed, so adding auto exposure moved none of the draws above
     on["auto_exposure"] = (coin(c.auto_exposure), {"auto_exposure_luma": float(c.auto_exposure_luma.draw(rng))})
+    on["sharpen"] = (coin(c.sharpen), {"sharpen_amount": float(c.sharpen_amount.draw(rng)),  # appended last, likewise
+                                       "sharpen_sigma_px": float(c.sharpen_sigma_px.draw(rng))})
     if not c.enabled:
         return CameraEffectsSpec()
     spec = CameraEffectsSpec(enabled=True, seed=seed)

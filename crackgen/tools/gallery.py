@@ -148,6 +148,7 @@ def _adapt_label(a: dict[str, Any]) -> str:
 
 
 _CAMFX_SHORT = {  # effect -> (short name, metadata key of its main value, format)
+    "auto_exposure": ("ae", "auto_exposure_luma", "{:.0f}"),
     "exposure": ("ev", "exposure_ev", "{:+.2f}"),
     "white_balance": ("wb", "wb_shift_mired", "{:+.0f}mired"),
     "tone": ("gamma", "tone_gamma", "{:.2f}"),
@@ -155,6 +156,7 @@ _CAMFX_SHORT = {  # effect -> (short name, metadata key of its main value, forma
     "defocus": ("defocus", "defocus_radius_px", "{:.1f}px"),
     "motion_blur": ("motion", "motion_length_px", "{:.1f}px"),
     "noise": ("noise", "noise_full_well_e", "{:.0f}e"),
+    "sharpen": ("sharpen", "sharpen_amount", "{:.2f}"),
     "jpeg": ("jpeg", "jpeg_quality", "q{}"),
 }
 

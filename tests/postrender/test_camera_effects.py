@@ -145,6 +145,40 @@ def test_blur_lowers_high_frequency_energy_and_keeps_flat_areas(blur):
     assert np.abs(f.astype(int) - 140).max() <= 1  # kernels sum to 1, borders reflected
 
 
+def test_sharpen_raises_high_frequency_energy_keeps_flat_areas_and_adds_no_colour():
+    blurred = cv2.GaussianBlur(textured(), (0, 0), 1.5)  # a soft render
+    (out,) = ce.apply_camera_effects([blurred], spec("sharpen", sharpen_amount=1.5, sharpen_sigma_px=1.0))
+    assert hf_energy(out) > 2.0 * hf_energy(blurred)
+    (f,) = ce.apply_camera_effects([flat(140)], spec("sharpen", sharpen_amount=2.0, sharpen_sigma_px=1.0))
+    assert np.abs(f.astype(int) - 140).max() <= 1
+    grey = np.repeat(blurred[..., :1], 3, axis=2)  # a grey image stays grey: the detail is luma, added to R, G, B alike
+    (g,) = ce.apply_camera_effects([grey], spec("sharpen", sharpen_amount=2.0, sharpen_sigma_px=1.0))
+    assert np.array_equal(g[..., 0], g[..., 1]) and np.array_equal(g[..., 1], g[..., 2])
+
+
+def test_sharpen_overshoots_both_sides_of_an_edge_and_zero_amount_is_neutral():
+    x = np.full((1, 41), 0.3, np.float32)
+    x[:, 20:] = 0.6
+    edge = np.repeat(x[..., None], 3, axis=2)
+    y = ce.unsharp_luma(edge, 1.0, 1.5)[0, :, 0]
+    assert y[19] < 0.3 - 0.02 and y[20] > 0.6 + 0.02  # the dark side darker, the bright side brighter
+    assert y[0] == pytest.approx(0.3, abs=1e-6) and y[-1] == pytest.approx(0.6, abs=1e-6)
+    np.testing.assert_allclose(ce.unsharp_luma(edge, 0.0, 1.5), edge, atol=1e-7)
+
+
+def test_sharpen_draws_leave_the_other_effects_unchanged():
+    base = "[camera_effects]\nenabled = true\nauto_exposure = 0.5\n"
+    a = [make_spec(parse_recipe(base), i).camera_effects for i in range(20)]
+    b = [make_spec(parse_recipe(base + "sharpen = 1.0\nsharpen_amount = {min = 1, max = 2}\n"), i).camera_effects
+         for i in range(20)]
+    for x, y in zip(a, b):
+        assert y.applied == [e for e in ce.EFFECTS if e in x.applied or e == "sharpen"]
+        assert 1.0 <= y.sharpen_amount <= 2.0 and 0.7 <= y.sharpen_sigma_px <= 1.5
+        assert {k: v for k, v in vars(y).items() if not k.startswith(("applied", "sharpen"))} == \
+            {k: v for k, v in vars(x).items() if not k.startswith(("applied", "sharpen"))}
+    assert all(x.sharpen_amount == 0.0 for x in a)  # off by default: neutral values
+
+
 def test_motion_blur_acts_along_its_direction_only():
     stripes = np.zeros((64, 64, 3), np.uint8)
     stripes[::4] = 255  # horizontal stripes: constant along x

@@ -148,3 +148,12 @@ def test_cards_show_shape_family_and_camera_effects(tmp_path):
     assert [it["params"]["shape"] for it in data["items"]] == ["network", "fbm"]
     assert [it["params"]["camera_fx"] for it in data["items"]] == ["ev:+0.31,noise:1234e,jpeg:q83", "none"]
     assert "crack shape family" in text and "camera effects applied" in text
+
+
+def test_camera_effect_labels_name_each_applied_effect_with_its_value():
+    from crackgen.tools.gallery import _camfx_label
+
+    meta = {"applied": ["auto_exposure", "noise", "sharpen", "jpeg"], "auto_exposure_luma": 151.2,
+            "noise_full_well_e": 1234.4, "sharpen_amount": 1.256, "sharpen_sigma_px": 1.0, "jpeg_quality": 83}
+    assert _camfx_label(meta) == "ae:151,noise:1234e,sharpen:1.26,jpeg:q83"
+    assert _camfx_label({"applied": []}) == "none"
