@@ -5,7 +5,11 @@ Two variants (thesis Ch. 3.3 / 4.6, Agresti et al. 2019), channels in order:
 * ``tof`` (4): stereo disparity, ToF disparity in the left view, left grey
   minus right grey warped by the stereo disparity, ToF amplitude;
 * ``lidar`` (3): stereo disparity, LiDAR disparity, left grey minus right grey
-  warped by the LiDAR disparity.
+  warped by the LiDAR disparity;
+* ``lidar4`` (4, ours): the ``lidar`` channels plus left grey minus right grey
+  warped by the *stereo* disparity. The thesis's LiDAR input carries photometric
+  evidence for the LiDAR only; where SGBM matched the wrong pixel (occlusions,
+  repeated texture) only this channel shows it, as the ToF variant's does.
 
 The candidate maps (channels 0 and 1) are made dense first: stereo holes and
 the sparse ToF/LiDAR by ``fusion.densify`` (normalised convolution by default),
@@ -29,8 +33,10 @@ from fusion.densify import fill_nearest, interpolate_sparse, valid_values
 from fusion.stereo import left_right_difference
 
 VARIANTS = {"tof": ("disp_stereo", "disp_tof", "lr_diff", "tof_amplitude"),
-            "lidar": ("disp_stereo", "disp_lidar", "lr_diff_lidar")}
-OTHER_NAME = {"tof": "ToF", "lidar": "LiDAR"}
+            "lidar": ("disp_stereo", "disp_lidar", "lr_diff_lidar"),
+            "lidar4": ("disp_stereo", "disp_lidar", "lr_diff_lidar", "lr_diff_stereo")}
+OTHER_NAME = {"tof": "ToF", "lidar": "LiDAR", "lidar4": "LiDAR"}
+LIDAR_VARIANTS = ("lidar", "lidar4")  # variants whose other sensor is a LiDAR (simulated from GT on real scenes)
 
 
 class FusionInputError(ValueError):
@@ -94,19 +100,21 @@ def build_inputs(
         x = np.stack([ds, do, lr, np.maximum(amp, 0.0)], axis=-1)
     else:
         do, lr = _lidar_channels(disp_other, left, right, densify)
-        x = np.stack([ds, do, lr], axis=-1)
+        chans = [ds, do, lr] + ([left_right_difference(left, right, ds)] if variant == "lidar4" else [])
+        x = np.stack(chans, axis=-1)
     return FusionInputs(variant, x.astype(np.float32), stereo_valid)
 
 
 def replace_lidar(inputs: FusionInputs, disp_lidar: np.ndarray, left: np.ndarray, right: np.ndarray,
                   densify: str = "normconv") -> FusionInputs:
     """A LiDAR-variant input with another LiDAR map: channels 1 and 2 rebuilt, the (already
-    densified) stereo channel and its validity kept, so the stereo is not densified again."""
-    if inputs.variant != "lidar":
+    densified) stereo channel, its validity and (``lidar4``) its grey difference kept, so the
+    stereo is not densified again."""
+    if inputs.variant not in LIDAR_VARIANTS:
         raise FusionInputError(f"replace_lidar needs a lidar-variant input, got {inputs.variant!r}")
     _shape_check(inputs.x.shape[:2], disp_lidar=disp_lidar, left=left, right=right)
     if not valid_values(disp_lidar).any():
         raise FusionInputError("the LiDAR disparity has no valid pixel")
     x = inputs.x.copy()
     x[..., 1], x[..., 2] = _lidar_channels(disp_lidar, left, right, densify)
-    return FusionInputs("lidar", x, inputs.stereo_valid)
+    return FusionInputs(inputs.variant, x, inputs.stereo_valid)

@@ -36,7 +36,7 @@ def add_bench_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true")
     p.add_argument("--no-model", action="store_true")
-    p.add_argument("--fusion", choices=("tof", "lidar"), default=None,
+    p.add_argument("--fusion", choices=("tof", "lidar", "lidar4"), default=None,
                    help="time the confidence CNN of the depth fusion (Adadelta, masked MSE) instead of --arch")
     add_data_args(p)
 

@@ -16,7 +16,7 @@ from trainer.errors import TrainerInputError
 
 LAYERS = ((5, 64), (3, 128), (3, 128), (3, 128), (3, 256), (3, 2))  # (kernel, output channels)
 PRELU_INIT = 0.02
-IN_CHANNELS = {"tof": 4, "lidar": 3}
+IN_CHANNELS = {"tof": 4, "lidar": 3, "lidar4": 4}
 
 
 class ConfidenceCNN(nn.Module):
@@ -25,7 +25,7 @@ class ConfidenceCNN(nn.Module):
     def __init__(self, in_channels: int = 4) -> None:
         super().__init__()
         if in_channels not in (3, 4):
-            raise TrainerInputError(f"the confidence CNN takes 3 (LiDAR) or 4 (ToF) input channels, got {in_channels}")
+            raise TrainerInputError(f"the confidence CNN takes 3 (LiDAR) or 4 (ToF, LiDAR4) input channels, got {in_channels}")
         self.in_channels = in_channels
         layers: list[nn.Module] = []
         cin = in_channels

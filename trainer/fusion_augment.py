@@ -17,14 +17,22 @@ the *stereo* channel get one of SGBM's region failures:
 * ``speckle``: per-pixel noise, sigma 0.5-3 px (weak texture).
 
 The target C* = exp(-|D - D_GT|) is computed from the corrupted map, so the
-labels stay exact. Only the lidar variant is allowed: its grey-difference
-channel warps by the LiDAR disparity and does not depend on stereo, whereas the
-ToF variant's warps by stereo and would contradict a corrupted stereo map.
+labels stay exact. The lidar variant's grey difference warps by the LiDAR
+disparity and does not depend on stereo, so a patch is corrupted after it is
+cut (``corrupt_stereo``). The lidar4 variant also carries the difference warped
+by the stereo disparity: there the failure is pasted into the whole scene's
+stereo map inside the patch window before the patch is cut, and that channel
+is recomputed from the corrupted map (``corrupt_scene_stereo``), so the
+photometric evidence of the failure is what a real SGBM failure would show.
+The ToF variant is not allowed: its only grey difference warps by stereo and
+its recipe's ToF is not the failure case this targets.
 """
 from __future__ import annotations
 
 import cv2
 import numpy as np
+
+from fusion.stereo import left_right_difference
 
 FAILURE_KINDS = ("offset", "flat", "speckle")
 
@@ -65,3 +73,17 @@ def corrupt_stereo(x: np.ndarray, rng: np.random.Generator, p: float) -> tuple[n
     d[region] = np.maximum(d[region], np.float32(0.1))
     return out, {"kind": kind, "pixels": int(region.sum())}
 
+
+
+def corrupt_scene_stereo(x: np.ndarray, grey: tuple[np.ndarray, np.ndarray], x0: int, y0: int, size: int,
+                         rng: np.random.Generator, p: float) -> tuple[np.ndarray, dict]:
+    """lidar4: (scene stack with a stereo failure pasted inside the ``size`` window at (x0, y0)
+    and channel 3, the stereo-warped grey difference, recomputed from the corrupted map, {kind,
+    pixels}); ``x`` is (H,W,4) and untouched. The draws are those of ``corrupt_stereo``."""
+    window, info = corrupt_stereo(x[y0:y0 + size, x0:x0 + size], rng, p)
+    if info["kind"] == "none":
+        return x, info
+    out = x.copy()
+    out[y0:y0 + size, x0:x0 + size, 0] = window[..., 0]
+    out[..., 3] = left_right_difference(grey[0], grey[1], out[..., 0])
+    return out, info

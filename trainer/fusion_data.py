@@ -29,14 +29,15 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from fusion.fusion_inputs import VARIANTS, FusionInputError, FusionInputs, build_inputs, replace_lidar
+from fusion.fusion_inputs import LIDAR_VARIANTS, VARIANTS, FusionInputError, FusionInputs, build_inputs, replace_lidar
 from fusion.scanline_lidar import random_scanline_lidar
+from fusion.stereo import to_grey
 from trainer.errors import TrainerInputError
 from trainer.imageio import DEPTH_EXTS, read_float_map
 
 log = logging.getLogger(__name__)
 
-OTHER_MEMBERS = {"tof": ("disp_tof", "tofamp"), "lidar": ("disp_lidar",)}
+OTHER_MEMBERS = {"tof": ("disp_tof", "tofamp"), "lidar": ("disp_lidar",), "lidar4": ("disp_lidar",)}
 
 
 @dataclass
@@ -45,6 +46,8 @@ class FusionScene:
     x: np.ndarray  # (H,W,C) float32 raw input channels, VARIANTS order
     gt: np.ndarray | None  # (H,W) float32 GT disparity, -1 none
     stereo_valid: np.ndarray | None = None  # (H,W) bool: measured stereo (not a filled hole); None = all
+    grey: tuple[np.ndarray, np.ndarray] | None = None  # (left, right) uint8 grey, kept for lidar4 training:
+    # its stereo grey difference is recomputed after a stereo failure is pasted (trainer.fusion_augment)
 
 
 def _external(folder: str | Path | None, key: str) -> np.ndarray | None:
@@ -74,11 +77,12 @@ def scene_from_sample(sample: dict, variant: str, densify: str = "normconv", ste
                            sample.get("tofamp"), densify)
     except FusionInputError as exc:
         raise TrainerInputError(f"sample {key}: {exc}") from None
-    return FusionScene(key, inp.x, np.asarray(sample["disp_gt"], np.float32), inp.stereo_valid)
+    grey = (to_grey(sample["rgb"]), to_grey(sample["right"])) if variant == "lidar4" else None
+    return FusionScene(key, inp.x, np.asarray(sample["disp_gt"], np.float32), inp.stereo_valid, grey)
 
 
 def resampled_lidar_scenes(scene: FusionScene, sample: dict, copies: int, seed: int,
-                           densify: str = "normconv") -> list[FusionScene]:
+                           densify: str = "normconv", variant: str = "lidar") -> list[FusionScene]:
     """``copies`` more scenes of one LiDAR-variant sample, each with a scan-line LiDAR
     re-drawn from its GT at a random density and noise (``random_scanline_lidar``); the
     stereo channel is the sample's own. Keys ``KEY~lidarJ``; draws seeded by (seed, key, J)."""
@@ -88,9 +92,9 @@ def resampled_lidar_scenes(scene: FusionScene, sample: dict, copies: int, seed: 
         lidar, _ = random_scanline_lidar(scene.gt, rng)
         if not (lidar > 0).any():
             continue
-        inp = replace_lidar(FusionInputs("lidar", scene.x, scene.stereo_valid), lidar, sample["rgb"], sample["right"],
+        inp = replace_lidar(FusionInputs(variant, scene.x, scene.stereo_valid), lidar, sample["rgb"], sample["right"],
                             densify)
-        out.append(FusionScene(f"{scene.key}~lidar{j}", inp.x, scene.gt, inp.stereo_valid))
+        out.append(FusionScene(f"{scene.key}~lidar{j}", inp.x, scene.gt, inp.stereo_valid, scene.grey))
     return out
 
 
@@ -105,8 +109,8 @@ def load_shard_scenes(path: str | Path, variant: str, keys: Sequence[str] | None
 
     if variant not in VARIANTS:
         raise TrainerInputError(f"unknown --variant {variant!r}; choose from {', '.join(VARIANTS)}")
-    if lidar_resample and variant != "lidar":
-        raise TrainerInputError(f"--lidar-resample needs --variant lidar, got {variant}")
+    if lidar_resample and variant not in LIDAR_VARIANTS:
+        raise TrainerInputError(f"--lidar-resample needs a LiDAR variant ({', '.join(LIDAR_VARIANTS)}), got {variant}")
     if not Path(path).exists():
         raise TrainerInputError(f"--data {path} does not exist")
     members = {"rgb", "right", "disp_sgm", "disp_gt", *OTHER_MEMBERS[variant]}
@@ -118,7 +122,7 @@ def load_shard_scenes(path: str | Path, variant: str, keys: Sequence[str] | None
                       unit="scene", disable=not progress, total=len(keys) if keys is not None else None):
             scenes.append(scene_from_sample(s, variant, densify, stereo_dir, other_dir))
             if lidar_resample > 0:
-                scenes += resampled_lidar_scenes(scenes[-1], s, lidar_resample, seed, densify)
+                scenes += resampled_lidar_scenes(scenes[-1], s, lidar_resample, seed, densify, variant)
     except TrainerInputError:
         raise
     except Exception as exc:  # ShardError, CodecError, ManifestError: name the dataset
@@ -183,24 +187,49 @@ def normalise(x: np.ndarray, mean: Sequence[float], std: Sequence[float]) -> np.
     return ((x - np.asarray(mean, np.float32)) / np.asarray(std, np.float32)).astype(np.float32)
 
 
+@dataclass(frozen=True)
+class PatchGeometry:
+    """Where a training patch is cut: integer corner, rotation about its centre, flips."""
+
+    x0: int
+    y0: int
+    size: int
+    angle_deg: float
+    flip_lr: bool
+    flip_ud: bool
+
+
+def patch_geometry(shape: tuple[int, int], size: int, rng: np.random.Generator, rotate_deg: float = 5.0,
+                   flips: bool = True) -> PatchGeometry:
+    """A random patch of a (H, W) scene; the draws (x0, y0, angle, two flips) in that order."""
+    h, w = shape[:2]
+    x0 = int(rng.integers(0, max(w - size, 0) + 1))  # integer corner: without rotation the patch is an exact crop
+    y0 = int(rng.integers(0, max(h - size, 0) + 1))
+    angle = float(rng.uniform(-rotate_deg, rotate_deg)) if rotate_deg > 0 else 0.0
+    flip_lr = bool(flips and rng.random() < 0.5)
+    flip_ud = bool(flips and rng.random() < 0.5)
+    return PatchGeometry(x0, y0, size, angle, flip_lr, flip_ud)
+
+
+def cut_patch(x: np.ndarray, gt: np.ndarray, g: PatchGeometry) -> tuple[np.ndarray, np.ndarray]:
+    """(x (s,s,C), gt (s,s)) of ``g``: inputs bilinear with replicated borders, GT nearest with -1 outside."""
+    half = (g.size - 1) / 2
+    m = cv2.getRotationMatrix2D((g.x0 + half, g.y0 + half), g.angle_deg, 1.0)
+    m[:, 2] -= (g.x0, g.y0)  # the patch centre lands on the output centre
+    xp = cv2.warpAffine(x, m, (g.size, g.size), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    if xp.ndim == 2:
+        xp = xp[..., None]
+    gp = cv2.warpAffine(gt, m, (g.size, g.size), flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                        borderValue=-1.0)
+    if g.flip_lr:
+        xp, gp = xp[:, ::-1], gp[:, ::-1]
+    if g.flip_ud:
+        xp, gp = xp[::-1], gp[::-1]
+    return np.ascontiguousarray(xp), np.ascontiguousarray(gp)
+
+
 def random_patch(scene: FusionScene, size: int, rng: np.random.Generator, rotate_deg: float = 5.0,
                  flips: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """A ``size`` x ``size`` patch (x (s,s,C), gt (s,s)) at a random place, rotated by U(-r, r)
     degrees about its centre and flipped left-right / up-down with probability 1/2 each."""
-    h, w = scene.x.shape[:2]
-    x0 = int(rng.integers(0, max(w - size, 0) + 1))  # integer corner: without rotation the patch is an exact crop
-    y0 = int(rng.integers(0, max(h - size, 0) + 1))
-    angle = rng.uniform(-rotate_deg, rotate_deg) if rotate_deg > 0 else 0.0
-    half = (size - 1) / 2
-    m = cv2.getRotationMatrix2D((x0 + half, y0 + half), angle, 1.0)
-    m[:, 2] -= (x0, y0)  # the patch centre lands on the output centre
-    x = cv2.warpAffine(scene.x, m, (size, size), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    if x.ndim == 2:
-        x = x[..., None]
-    gt = cv2.warpAffine(scene.gt, m, (size, size), flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
-                        borderValue=-1.0)
-    if flips and rng.random() < 0.5:
-        x, gt = x[:, ::-1], gt[:, ::-1]
-    if flips and rng.random() < 0.5:
-        x, gt = x[::-1], gt[::-1]
-    return np.ascontiguousarray(x), np.ascontiguousarray(gt)
+    return cut_patch(scene.x, scene.gt, patch_geometry(scene.x.shape, size, rng, rotate_deg, flips))

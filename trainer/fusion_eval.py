@@ -22,7 +22,7 @@ import torch
 from tqdm import tqdm
 
 from fusion.depth_metrics import average_metrics, disparity_metrics, format_table
-from fusion.fusion_inputs import OTHER_NAME
+from fusion.fusion_inputs import LIDAR_VARIANTS, OTHER_NAME
 from fusion.postfilter import PostFilter
 from trainer.errors import TrainerInputError
 from trainer.fusion_apply import add_stereo_holes_arg, fuse_scene, load_fusion_model
@@ -71,10 +71,10 @@ def run_fusion_eval(args: argparse.Namespace) -> dict[str, Any]:
     device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
     model, cfg, ckpt = load_fusion_model(args.ckpt, device)
     if args.real_stereo:
-        if cfg["variant"] != "lidar":
+        if cfg["variant"] not in LIDAR_VARIANTS:
             raise TrainerInputError(f"--real-stereo simulates a LiDAR: {args.ckpt} is a {cfg['variant']} model")
         data = ", ".join(str(Path(f).name) for f in args.real_stereo)
-        scenes = [real_scene(f, args, cfg["densify"]) for f in args.real_stereo]
+        scenes = [real_scene(f, args, cfg["densify"], cfg["variant"]) for f in args.real_stereo]
     else:
         data = args.data or ckpt["args"].get("data")
         if data is None:

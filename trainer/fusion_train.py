@@ -30,19 +30,20 @@ from tqdm import tqdm
 from fusion.confidence import confidence_target, fuse_max
 from fusion.densify import METHODS as DENSIFY_METHODS
 from fusion.depth_metrics import disparity_metrics
-from fusion.fusion_inputs import VARIANTS
+from fusion.fusion_inputs import LIDAR_VARIANTS, VARIANTS
 from trainer.checkpoint import load_checkpoint, save_checkpoint
 from trainer.confidence_cnn import IN_CHANNELS, ConfidenceCNN
 from trainer.errors import TrainerInputError
-from trainer.fusion_augment import corrupt_stereo
+from trainer.fusion_augment import corrupt_scene_stereo, corrupt_stereo
 from trainer.fusion_data import (
     DISP_REFS,
     FusionScene,
     channel_stats,
+    cut_patch,
     disparity_reference,
     load_shard_scenes,
     normalise,
-    random_patch,
+    patch_geometry,
     relative_input,
     shard_keys,
 )
@@ -58,7 +59,8 @@ RESUME_FIXED_ARGS = {"variant": None, "seed": None, "val_fraction": None, "split
 def add_fusion_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", required=True, help="shards with stereo + ToF (+ LiDAR) (recipes/stereo_tof.toml)")
     p.add_argument("--variant", choices=tuple(VARIANTS), default="tof",
-                   help="tof: 4 channels (stereo, ToF, L-R diff, amplitude); lidar: 3 channels")
+                   help="tof: 4 channels (stereo, ToF, L-R diff, amplitude); lidar: 3 channels (stereo, LiDAR, "
+                        "L-R diff warped by the LiDAR); lidar4: lidar + the L-R diff warped by the stereo")
     p.add_argument("--val-fraction", type=float, default=0.2, help="held-out fraction of the samples")
     p.add_argument("--split-seed", type=int, default=0)
     p.add_argument("--patch", type=int, default=128, help="random patch side (px)")
@@ -136,9 +138,14 @@ def make_batch(scenes: Sequence[FusionScene], args: argparse.Namespace, step: in
     xs, ts = [], []
     for _ in range(args.batch_size):
         scene = scenes[rng.integers(len(scenes))]
-        x, gt = random_patch(scene, size, rng, args.rotate_deg, not args.no_flips)
-        if args.stereo_failures > 0:
-            x, _ = corrupt_stereo(x, rng, args.stereo_failures)
+        g = patch_geometry(scene.x.shape, size, rng, args.rotate_deg, not args.no_flips)
+        if args.stereo_failures > 0 and args.variant == "lidar4":  # before the cut: channel 3 is recomputed
+            xs_scene, _ = corrupt_scene_stereo(scene.x, scene.grey, g.x0, g.y0, size, rng, args.stereo_failures)
+            x, gt = cut_patch(xs_scene, scene.gt, g)
+        else:
+            x, gt = cut_patch(scene.x, scene.gt, g)
+            if args.stereo_failures > 0:
+                x, _ = corrupt_stereo(x, rng, args.stereo_failures)
         ts.append(np.stack([confidence_target(x[..., 0], gt), confidence_target(x[..., 1], gt)]))
         ref = disparity_reference(scene.x, args.disp_ref)  # the whole scene's, as at inference
         xs.append(normalise(relative_input(x, ref), mean, std).transpose(2, 0, 1))
@@ -214,12 +221,12 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
         raise TrainerInputError("--batch-size must be >= 1, --patch >= 8 and --steps >= 0")
     if not 0.0 <= args.stereo_failures <= 1.0:
         raise TrainerInputError(f"--stereo-failures must be a probability in [0, 1], got {args.stereo_failures}")
-    if args.stereo_failures > 0 and args.variant != "lidar":
-        raise TrainerInputError("--stereo-failures needs --variant lidar: the ToF variant's grey difference is "
-                                "warped by the stereo disparity, which a pasted failure would contradict")
-    if args.lidar_resample < 0 or (args.lidar_resample > 0 and args.variant != "lidar"):
-        raise TrainerInputError(f"--lidar-resample must be >= 0 and needs --variant lidar, got {args.lidar_resample} "
-                                f"with --variant {args.variant}")
+    if args.stereo_failures > 0 and args.variant not in LIDAR_VARIANTS:
+        raise TrainerInputError("--stereo-failures needs --variant lidar or lidar4: the ToF variant's grey difference "
+                                "is warped by the stereo disparity, which a pasted failure would contradict")
+    if args.lidar_resample < 0 or (args.lidar_resample > 0 and args.variant not in LIDAR_VARIANTS):
+        raise TrainerInputError(f"--lidar-resample must be >= 0 and needs --variant lidar or lidar4, got "
+                                f"{args.lidar_resample} with --variant {args.variant}")
     if args.lidar_resample > 0 and args.other_dir:
         raise TrainerInputError("--lidar-resample re-draws the LiDAR from the GT: it cannot be combined with --other-dir")
     device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))

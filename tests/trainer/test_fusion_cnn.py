@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from fusion_samples import fusion_sample, write_fusion_shards  # tests/ helper
 
 from crackgen.shards import ShardWriter, sample_key
 from trainer.cli import build_parser
@@ -22,38 +23,10 @@ from trainer.errors import TrainerInputError
 from trainer.fusion_data import FusionScene, load_shard_scenes, random_patch
 from trainer.fusion_train import make_batch, masked_mse
 
-H, W = 40, 56
-
-
-def fusion_sample(rng: np.random.Generator) -> dict:
-    yy, xx = np.mgrid[:H, :W]
-    gt = (8.0 + 0.02 * xx + 0.01 * yy).astype(np.float32)
-    tex = rng.integers(0, 255, (H, W), dtype=np.uint8)
-    tex[:, W // 2:] = 128  # no texture on the right half: stereo fails there
-    left = np.repeat(tex[..., None], 3, axis=2)
-    right = np.roll(left, -8, axis=1)
-    stereo = gt + rng.normal(0, 0.05, gt.shape).astype(np.float32)
-    stereo[:, W // 2:] += rng.normal(0, 2.0, (H, W - W // 2)).astype(np.float32)
-    amp = np.where(yy < H // 2, 0.8, 0.05).astype(np.float32)  # dark lower half: noisy ToF
-    tof = gt + rng.normal(0, 1, gt.shape).astype(np.float32) * np.where(yy < H // 2, 0.05, 2.0).astype(np.float32)
-    sparse = np.zeros((H, W), bool)
-    sparse[::2, ::2] = True
-    lidar = np.where(yy % 8 == 0, gt, -1.0).astype(np.float32)
-    return {"rgb.png": left, "right.png": right, "disp_gt.exr": gt, "disp_sgm.exr": np.maximum(stereo, 0.5),
-            "disp_tof.exr": np.where(sparse, np.maximum(tof, 0.5), -1.0).astype(np.float32),
-            "tofamp.exr": np.where(sparse, amp, -1.0).astype(np.float32), "disp_lidar.exr": lidar,
-            "json": {"synthetic": True}}
-
 
 @pytest.fixture(scope="module")
 def fusion_shards(tmp_path_factory):
-    root = tmp_path_factory.mktemp("fusion_shards")
-    rng = np.random.default_rng(3)
-    for s in range(2):
-        with ShardWriter(root, s) as w:
-            for i in range(3):
-                w.add(sample_key(s, i), fusion_sample(rng))
-    return root
+    return write_fusion_shards(tmp_path_factory.mktemp("fusion_shards"), 3)
 
 
 @pytest.mark.parametrize("channels,size", [(4, (37, 53)), (3, (16, 16))])
