@@ -16,6 +16,10 @@ the sparse ToF/LiDAR by ``fusion.densify`` (normalised convolution by default),
 unless the caller passes maps that are already dense (an external stereo
 network, a depth-completion network). The two candidates are what the fusion
 rules pick from, so the CNN scores exactly the values that get fused.
+``other_bm3d`` > 0 denoises the densified ToF/LiDAR candidate with BM3D (that
+sigma, disparity px) before anything is computed from it: on real scenes a
+BM3D-filtered LiDAR alone beats every fusion of the raw one, so the CNN is
+trained to decide between stereo and the *filtered* map, the one it has to beat.
 
 ``stereo_valid`` keeps where the stereo map had a measured value before its
 holes were filled: a filled hole is an interpolation across an occlusion or a
@@ -30,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion.densify import fill_nearest, interpolate_sparse, valid_values
+from fusion.postfilter import bm3d_disparity
 from fusion.stereo import left_right_difference
 
 VARIANTS = {"tof": ("disp_stereo", "disp_tof", "lr_diff", "tof_amplitude"),
@@ -66,10 +71,18 @@ def _shape_check(shape: tuple[int, int], **maps: np.ndarray | None) -> None:
             raise FusionInputError(f"{name} is {np.asarray(m).shape[:2]}, stereo disparity is {shape}")
 
 
+def dense_other(disp_other: np.ndarray, densify: str, other_bm3d: float = 0.0) -> np.ndarray:
+    """The ToF/LiDAR candidate: densified, then BM3D-denoised when ``other_bm3d`` > 0."""
+    if other_bm3d < 0:
+        raise FusionInputError(f"other_bm3d must be >= 0 (BM3D sigma in disparity px), got {other_bm3d}")
+    do = interpolate_sparse(disp_other, densify)
+    return bm3d_disparity(do, other_bm3d) if other_bm3d > 0 else do
+
+
 def _lidar_channels(disp_lidar: np.ndarray, left: np.ndarray, right: np.ndarray,
-                    densify: str) -> tuple[np.ndarray, np.ndarray]:
+                    densify: str, other_bm3d: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """The LiDAR variant's channels 1 and 2: the densified LiDAR and the grey difference warped by it."""
-    do = interpolate_sparse(disp_lidar, densify)
+    do = dense_other(disp_lidar, densify, other_bm3d)
     return do, left_right_difference(left, right, do)
 
 
@@ -81,6 +94,7 @@ def build_inputs(
     right: np.ndarray,
     amplitude: np.ndarray | None = None,
     densify: str = "normconv",
+    other_bm3d: float = 0.0,
 ) -> FusionInputs:
     """Input stack of ``variant`` from sparse or dense maps (all in the left view, -1 = none)."""
     if variant not in VARIANTS:
@@ -94,19 +108,19 @@ def build_inputs(
     if variant == "tof":
         if amplitude is None:
             raise FusionInputError("the tof variant needs the ToF amplitude")
-        do = interpolate_sparse(disp_other, densify)
+        do = dense_other(disp_other, densify, other_bm3d)
         amp = fill_nearest(amplitude)
         lr = left_right_difference(left, right, ds)
         x = np.stack([ds, do, lr, np.maximum(amp, 0.0)], axis=-1)
     else:
-        do, lr = _lidar_channels(disp_other, left, right, densify)
+        do, lr = _lidar_channels(disp_other, left, right, densify, other_bm3d)
         chans = [ds, do, lr] + ([left_right_difference(left, right, ds)] if variant == "lidar4" else [])
         x = np.stack(chans, axis=-1)
     return FusionInputs(variant, x.astype(np.float32), stereo_valid)
 
 
 def replace_lidar(inputs: FusionInputs, disp_lidar: np.ndarray, left: np.ndarray, right: np.ndarray,
-                  densify: str = "normconv") -> FusionInputs:
+                  densify: str = "normconv", other_bm3d: float = 0.0) -> FusionInputs:
     """A LiDAR-variant input with another LiDAR map: channels 1 and 2 rebuilt, the (already
     densified) stereo channel, its validity and (``lidar4``) its grey difference kept, so the
     stereo is not densified again."""
@@ -116,5 +130,5 @@ def replace_lidar(inputs: FusionInputs, disp_lidar: np.ndarray, left: np.ndarray
     if not valid_values(disp_lidar).any():
         raise FusionInputError("the LiDAR disparity has no valid pixel")
     x = inputs.x.copy()
-    x[..., 1], x[..., 2] = _lidar_channels(disp_lidar, left, right, densify)
+    x[..., 1], x[..., 2] = _lidar_channels(disp_lidar, left, right, densify, other_bm3d)
     return FusionInputs(inputs.variant, x, inputs.stereo_valid)

@@ -149,7 +149,8 @@ def run_fuse(args: argparse.Namespace) -> dict[str, Any]:
     if variant == "tof" and amp is None:
         raise TrainerInputError(f"checkpoint {args.ckpt} is a ToF model: give --amplitude")
     try:
-        inp = build_inputs(variant, stereo, other, read_rgb(args.left), read_rgb(args.right), amp, cfg["densify"])
+        inp = build_inputs(variant, stereo, other, read_rgb(args.left), read_rgb(args.right), amp, cfg["densify"],
+                           cfg.get("other_bm3d", 0.0))
     except FusionInputError as exc:
         raise TrainerInputError(str(exc)) from None
     maps = fuse_scene(model, cfg, inp.x, device, post_filter_from_args(args), inp.stereo_valid, args.stereo_holes)

@@ -61,7 +61,7 @@ def _external(folder: str | Path | None, key: str) -> np.ndarray | None:
 
 
 def scene_from_sample(sample: dict, variant: str, densify: str = "normconv", stereo_dir: str | Path | None = None,
-                      other_dir: str | Path | None = None) -> FusionScene:
+                      other_dir: str | Path | None = None, other_bm3d: float = 0.0) -> FusionScene:
     """One shard sample -> FusionScene; a missing member is a one-line error naming it."""
     key = sample["__key__"]
     need = ("rgb", "right", "disp_sgm", "disp_gt") + OTHER_MEMBERS[variant]
@@ -74,7 +74,7 @@ def scene_from_sample(sample: dict, variant: str, densify: str = "normconv", ste
     other = sample[OTHER_MEMBERS[variant][0]] if ext_other is None else ext_other
     try:
         inp = build_inputs(variant, stereo, other, sample["rgb"], sample["right"],
-                           sample.get("tofamp"), densify)
+                           sample.get("tofamp"), densify, other_bm3d)
     except FusionInputError as exc:
         raise TrainerInputError(f"sample {key}: {exc}") from None
     grey = (to_grey(sample["rgb"]), to_grey(sample["right"])) if variant == "lidar4" else None
@@ -82,7 +82,8 @@ def scene_from_sample(sample: dict, variant: str, densify: str = "normconv", ste
 
 
 def resampled_lidar_scenes(scene: FusionScene, sample: dict, copies: int, seed: int,
-                           densify: str = "normconv", variant: str = "lidar") -> list[FusionScene]:
+                           densify: str = "normconv", variant: str = "lidar", other_bm3d: float = 0.0
+                           ) -> list[FusionScene]:
     """``copies`` more scenes of one LiDAR-variant sample, each with a scan-line LiDAR
     re-drawn from its GT at a random density and noise (``random_scanline_lidar``); the
     stereo channel is the sample's own. Keys ``KEY~lidarJ``; draws seeded by (seed, key, J)."""
@@ -93,14 +94,15 @@ def resampled_lidar_scenes(scene: FusionScene, sample: dict, copies: int, seed: 
         if not (lidar > 0).any():
             continue
         inp = replace_lidar(FusionInputs(variant, scene.x, scene.stereo_valid), lidar, sample["rgb"], sample["right"],
-                            densify)
+                            densify, other_bm3d)
         out.append(FusionScene(f"{scene.key}~lidar{j}", inp.x, scene.gt, inp.stereo_valid, scene.grey))
     return out
 
 
 def load_shard_scenes(path: str | Path, variant: str, keys: Sequence[str] | None = None, densify: str = "normconv",
                       stereo_dir: str | Path | None = None, other_dir: str | Path | None = None,
-                      progress: bool = True, lidar_resample: int = 0, seed: int = 0) -> list[FusionScene]:
+                      progress: bool = True, lidar_resample: int = 0, seed: int = 0,
+                      other_bm3d: float = 0.0) -> list[FusionScene]:
     """All (or ``keys``) samples of a dataset as scenes, in key order; with ``lidar_resample`` K
     (LiDAR variant) each sample also gives K scenes with a re-drawn LiDAR (``resampled_lidar_scenes``)."""
     from tqdm import tqdm
@@ -120,9 +122,9 @@ def load_shard_scenes(path: str | Path, variant: str, keys: Sequence[str] | None
         scenes = []
         for s in tqdm(iter_samples(path, keys=keys, members=members), desc="fusion inputs",
                       unit="scene", disable=not progress, total=len(keys) if keys is not None else None):
-            scenes.append(scene_from_sample(s, variant, densify, stereo_dir, other_dir))
+            scenes.append(scene_from_sample(s, variant, densify, stereo_dir, other_dir, other_bm3d))
             if lidar_resample > 0:
-                scenes += resampled_lidar_scenes(scenes[-1], s, lidar_resample, seed, densify, variant)
+                scenes += resampled_lidar_scenes(scenes[-1], s, lidar_resample, seed, densify, variant, other_bm3d)
     except TrainerInputError:
         raise
     except Exception as exc:  # ShardError, CodecError, ManifestError: name the dataset

@@ -74,7 +74,8 @@ def run_fusion_eval(args: argparse.Namespace) -> dict[str, Any]:
         if cfg["variant"] not in LIDAR_VARIANTS:
             raise TrainerInputError(f"--real-stereo simulates a LiDAR: {args.ckpt} is a {cfg['variant']} model")
         data = ", ".join(str(Path(f).name) for f in args.real_stereo)
-        scenes = [real_scene(f, args, cfg["densify"], cfg["variant"]) for f in args.real_stereo]
+        scenes = [real_scene(f, args, cfg["densify"], cfg["variant"], cfg.get("other_bm3d", 0.0))
+                  for f in args.real_stereo]
     else:
         data = args.data or ckpt["args"].get("data")
         if data is None:
@@ -86,7 +87,8 @@ def run_fusion_eval(args: argparse.Namespace) -> dict[str, Any]:
         stereo_dir = args.stereo_dir or ckpt["args"].get("stereo_dir")
         other_dir = args.other_dir or ckpt["args"].get("other_dir")
         scenes = load_shard_scenes(data, cfg["variant"], keys=keys, densify=cfg["densify"], stereo_dir=stereo_dir,
-                                   other_dir=other_dir, progress=not args.no_progress)
+                                   other_dir=other_dir, progress=not args.no_progress,
+                                   other_bm3d=cfg.get("other_bm3d", 0.0))
     filters = {"fused, max + BM3D after": PostFilter("bm3d", "after", args.bm3d_sigma)}
     if args.all_filters:
         filters.update({"BM3D before, fused max": PostFilter("bm3d", "before", args.bm3d_sigma),

@@ -47,7 +47,8 @@ def load_real_pair(folder: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     raise TrainerInputError(f"--real-stereo {folder}: neither ETH3D (disp0.pfm) nor Middlebury (disp_left.tif)")
 
 
-def real_scene(folder: str | Path, args: argparse.Namespace, densify: str, variant: str = "lidar") -> FusionScene:
+def real_scene(folder: str | Path, args: argparse.Namespace, densify: str, variant: str = "lidar",
+               other_bm3d: float = 0.0) -> FusionScene:
     folder = Path(folder)
     if not folder.is_dir():
         raise TrainerInputError(f"--real-stereo {folder} is not a folder")
@@ -57,7 +58,7 @@ def real_scene(folder: str | Path, args: argparse.Namespace, densify: str, varia
     rng = np.random.default_rng(np.random.SeedSequence([args.seed, zlib.crc32(folder.name.encode())]))
     lidar = scanline_lidar(gt, args.lidar_lines, rng, args.lidar_sigma_px, args.lidar_dropout)
     try:
-        inp = build_inputs(variant, stereo, lidar, left, right, None, densify)
+        inp = build_inputs(variant, stereo, lidar, left, right, None, densify, other_bm3d)
     except FusionInputError as exc:
         raise TrainerInputError(f"--real-stereo {folder}: {exc}") from None
     return FusionScene(folder.name, inp.x, gt.astype(np.float32), inp.stereo_valid)

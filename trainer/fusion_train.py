@@ -53,7 +53,7 @@ log = logging.getLogger(__name__)
 
 OPTIMIZERS = ("adadelta", "adam")
 RESUME_FIXED_ARGS = {"variant": None, "seed": None, "val_fraction": None, "split_seed": None, "densify": None,
-                     "disp_ref": "none", "stereo_failures": 0.0, "lidar_resample": 0}  # name -> value assumed for checkpoints made before the option
+                     "disp_ref": "none", "stereo_failures": 0.0, "lidar_resample": 0, "other_bm3d": 0.0}  # name -> value assumed for checkpoints made before the option
 
 
 def add_fusion_args(p: argparse.ArgumentParser) -> None:
@@ -71,6 +71,9 @@ def add_fusion_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rotate-deg", type=float, default=5.0)
     p.add_argument("--no-flips", action="store_true")
     p.add_argument("--densify", choices=DENSIFY_METHODS, default="normconv", help="how sparse ToF/LiDAR is filled")
+    p.add_argument("--other-bm3d", type=float, default=0.0, metavar="SIGMA",
+                   help="BM3D-denoise the densified ToF/LiDAR candidate (noise std SIGMA, disparity px) before the CNN "
+                        "sees it and the rules fuse it, in training, fuse and fusion-eval alike; 0 = off (thesis)")
     p.add_argument("--disp-ref", choices=DISP_REFS, default="none",
                    help="median: feed disparities relative to the scene's ToF/LiDAR median (scale-free across scenes)")
     p.add_argument("--stereo-failures", type=float, default=0.0, metavar="P",
@@ -124,10 +127,10 @@ def build_optimizer(args: argparse.Namespace, model: torch.nn.Module) -> torch.o
 
 
 def sample_config(variant: str, mean: Sequence[float], std: Sequence[float], densify: str,
-                  disp_ref: str = "none") -> dict[str, Any]:
+                  disp_ref: str = "none", other_bm3d: float = 0.0) -> dict[str, Any]:
     """What ``fuse`` and ``fusion-eval`` need to rebuild the inputs exactly as in training."""
     return {"task": "fusion", "variant": variant, "in_channels": IN_CHANNELS[variant], "channels": list(VARIANTS[variant]),
-            "mean": list(mean), "std": list(std), "densify": densify, "disp_ref": disp_ref}
+            "mean": list(mean), "std": list(std), "densify": densify, "disp_ref": disp_ref, "other_bm3d": other_bm3d}
 
 
 def make_batch(scenes: Sequence[FusionScene], args: argparse.Namespace, step: int, mean, std
@@ -199,7 +202,7 @@ def validate(run: FusionRun) -> dict[str, float]:
 def checkpoint_payload(run: FusionRun, step: int, best: dict[str, Any], val_keys: list[str]) -> dict[str, Any]:
     return {"model": run.model.state_dict(), "optimizer": run.optimizer.state_dict(), "step": step,
             "args": vars(run.args), "sample_config": sample_config(run.args.variant, run.mean, run.std, run.args.densify,
-                                                           run.args.disp_ref),
+                                                           run.args.disp_ref, run.args.other_bm3d),
             "best": best, "val_keys": val_keys, "train_keys": [s.key for s in run.train]}
 
 
@@ -239,8 +242,10 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     train_keys, val_keys = build_split(args)
     progress = not args.no_progress
+    if args.other_bm3d < 0:
+        raise TrainerInputError(f"--other-bm3d must be >= 0 (BM3D sigma in disparity px), got {args.other_bm3d}")
     load = dict(variant=args.variant, densify=args.densify, stereo_dir=args.stereo_dir, other_dir=args.other_dir,
-                progress=progress)
+                progress=progress, other_bm3d=args.other_bm3d)
     train = load_shard_scenes(args.data, keys=train_keys, lidar_resample=args.lidar_resample, seed=args.seed, **load)
     val = load_shard_scenes(args.data, keys=val_keys, **load) if val_keys else []
     mean, std = channel_stats(train, args.disp_ref) if ckpt is None else (ckpt["sample_config"]["mean"], ckpt["sample_config"]["std"])
