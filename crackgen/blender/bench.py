@@ -18,7 +18,7 @@ from crackgen.config.spec import make_spec
 from crackgen.procedural.crackmap import crack_map
 from crackgen.procedural.materials import material_maps
 from crackgen.procedural.shadow_pattern import shadow_alpha
-from crackgen.procedural.surface import surface_vertices
+from crackgen.procedural.surface import surface_vertices, with_steps
 from crackgen.sim.rig import make_rig
 
 
@@ -30,7 +30,7 @@ def bench_live_scene(recipe: Recipe, samples: int = 5, distinct: int = 2, shadow
     for i in range(max(1, distinct)):
         s = make_spec(recipe, i)
         cm = crack_map(s.crack, recipe.surface.crackmap_px, s.surface.size_m, measure=False)
-        prepared.append((s, make_rig(s), surface_vertices(cm, recipe.surface.grid_px), material_maps(s.material, cm), shadow_alpha(s.shadow, shadow_px)))
+        prepared.append((s, make_rig(s), with_steps(surface_vertices(cm, recipe.surface.grid_px), s.surface.steps), material_maps(s.material, cm), shadow_alpha(s.shadow, shadow_px)))
     max_lights = max(len(p[0].lights) for p in prepared)
     r, c = recipe.render, recipe.camera
     t0 = time.perf_counter()

@@ -218,6 +218,9 @@ class SurfaceSection(Section):
     size_m: _t(0.05, 100, lo_open=True) = _d({"min": 2.0, "max": 3.0}, "side of the square surface patch (m)")
     grid_px: int = Field(384, ge=8, le=4096, description="mesh vertices per side")
     crackmap_px: int = Field(1024, ge=16, le=8192, description="crack map resolution per side (px)")
+    steps: _t(0, 8, integer=True) = _d(0, "straight height steps across the patch (kerb, faulted slab edge): count per sample (integer, 0 = flat)")
+    step_height_m: _t(0.001, 1) = _d({"min": 0.02, "max": 0.15}, "height of each step, raised side towards the cameras (m)")
+    step_offset: _t(-0.5, 0.5) = _d({"min": -0.2, "max": 0.2}, "signed distance of a step's line from the patch centre (fraction of the side)")
 
 
 class DistractorSection(Section):

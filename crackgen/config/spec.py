@@ -75,10 +75,21 @@ class CrackSpec:
 
 
 @dataclass
+class StepSpec:
+    """A straight height step across the surface (kerb, faulted slab edge): real scenes have depth
+    edges, where interpolated LiDAR/ToF and stereo fail differently; a flat patch has none."""
+
+    angle_rad: float  # direction of the step normal n = (cos, sin) in the surface plane
+    offset_m: float  # the line is n . (x, y) = offset_m; the side beyond it is raised
+    height_m: float  # raised by this much towards the cameras (+z)
+
+
+@dataclass
 class SurfaceSpec:
     size_m: float  # side of the square patch (m)
     grid_px: int  # mesh vertices per side
     crackmap_px: int  # crack map resolution per side (surface coordinates)
+    steps: list[StepSpec] = field(default_factory=list)  # height steps (empty: the flat patch)
 
 
 @dataclass
@@ -645,6 +656,15 @@ def draw_camera_effects(c: CameraEffectsSection, rng: np.random.Generator) -> Ca
     return spec
 
 
+def _surface(recipe: Recipe, rng: np.random.Generator) -> SurfaceSpec:
+    """Patch size, then the steps (drawn after it, so a recipe without steps keeps its sizes)."""
+    s = recipe.surface
+    size = float(s.size_m.draw(rng))
+    steps = [StepSpec(angle_rad=float(rng.uniform(0.0, math.pi)), offset_m=float(s.step_offset.draw(rng)) * size,
+                      height_m=float(s.step_height_m.draw(rng))) for _ in range(int(s.steps.draw(rng)))]
+    return SurfaceSpec(size_m=size, grid_px=s.grid_px, crackmap_px=s.crackmap_px, steps=steps)
+
+
 def make_spec(recipe: Recipe, index: int, attempt: int = 0) -> SampleSpec:
     """Draw every random parameter of sample ``index`` of ``recipe``, each section from its own stream.
 
@@ -655,7 +675,6 @@ def make_spec(recipe: Recipe, index: int, attempt: int = 0) -> SampleSpec:
     def rng(section: str) -> np.random.Generator:
         return section_rng(recipe.dataset.seed, index, section, attempt)
 
-    s = recipe.surface
     li = recipe.lights
     a = rng("ambient")
     lights = _lights(recipe, rng("lights"))
@@ -665,7 +684,7 @@ def make_spec(recipe: Recipe, index: int, attempt: int = 0) -> SampleSpec:
         index=int(index),
         recipe_seed=int(recipe.dataset.seed),
         crack=_crack(recipe, rng("crack")),
-        surface=SurfaceSpec(size_m=s.size_m.draw(rng("surface")), grid_px=s.grid_px, crackmap_px=s.crackmap_px),
+        surface=_surface(recipe, rng("surface")),
         material=_material(recipe, rng("material")),
         lights=lights,
         ambient=AmbientSpec(strength=li.ambient_strength.draw(a), color_temp_k=li.ambient_color_temp_k.draw(a)),

@@ -38,7 +38,7 @@ from crackgen.postrender.targets import TargetPhotos
 from crackgen.procedural.crackmap import crack_map
 from crackgen.procedural.materials import material_maps
 from crackgen.procedural.shadow_pattern import shadow_alpha
-from crackgen.procedural.surface import mesh_depth_map, surface_faces, surface_uvs, surface_vertices
+from crackgen.procedural.surface import mesh_depth_map, surface_faces, surface_uvs, surface_vertices, with_steps
 from crackgen.sim.groundtruth import view_ground_truth, view_label
 from crackgen.sim.raycast import MeshRaycaster
 from crackgen.sim.rig import make_rig
@@ -171,7 +171,8 @@ class SampleProducer:
             )
         with tm.stage("surface"):
             g = spec.surface.grid_px
-            vertices = surface_vertices(cm, g)
+            vertices = surface_vertices(cm, g)  # the crack relief alone: what mesh_depth_map measures
+            world = with_steps(vertices, spec.surface.steps)  # + height steps: what cameras and sensors see
         with tm.stage("materials"):
             # the normal map carries only the crack depth the mesh cannot hold: the slope counts once
             maps = material_maps(spec.material, cm, mesh_depth_map(vertices, g, spec.material.texture_px))
@@ -184,11 +185,11 @@ class SampleProducer:
             run_spec = spec
             if self.threads > 0:
                 run_spec = dataclasses.replace(spec, render=dataclasses.replace(spec.render, threads=self.threads))
-            scene_meta = scene.update(run_spec, rig, vertices, maps, alpha)
+            scene_meta = scene.update(run_spec, rig, world, maps, alpha)
         with tm.stage("render"):
             out = scene.render(linear=self.keep_linear)
         with tm.stage("raycast"):
-            caster = MeshRaycaster(vertices, np.asarray(surface_faces(g)), np.asarray(surface_uvs(g)))
+            caster = MeshRaycaster(world, np.asarray(surface_faces(g)), np.asarray(surface_uvs(g)))
         with tm.stage("groundtruth"):
             gt = view_ground_truth(rig.rgb, caster, cm.mask)
             # the visible label follows the groove the mesh renders, not only the crack map's mask

@@ -35,6 +35,7 @@ __all__ = [
     "surface_uvs",
     "surface_faces",
     "surface_vertices",
+    "with_steps",
     "mesh_depth_at_uv",
     "mesh_depth_map",
     "centreline_depth_kept",
@@ -110,6 +111,17 @@ def surface_vertices(cm: CrackMap, grid_px: int, sampling: str = "footprint") ->
     out[:, 0] = (uv[:, 0] - 0.5) * cm.size_m
     out[:, 1] = (uv[:, 1] - 0.5) * cm.size_m
     out[:, 2] = 0.0 - depth_at_uv(src, uv[:, 0], uv[:, 1])  # 0 - d: no -0.0 on the flat part
+    return out
+
+
+def with_steps(vertices: np.ndarray, steps) -> np.ndarray:
+    """``vertices`` with each ``StepSpec``'s far side raised by its height (+z): kerbs and faulted slab
+    edges. The wall between the two levels spans one vertex spacing. The crack depths are those of
+    ``vertices``: pass the step-free vertices to ``mesh_depth_map``, these to the renderer and ray caster."""
+    out = np.array(vertices, dtype=np.float32, copy=True)
+    for st in steps:
+        side = out[:, 0] * np.cos(st.angle_rad) + out[:, 1] * np.sin(st.angle_rad) > st.offset_m
+        out[side, 2] += np.float32(st.height_m)
     return out
 
 

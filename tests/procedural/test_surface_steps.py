@@ -1,0 +1,65 @@
+"""[surface] steps: straight height steps (kerbs, faulted slab edges) that give scenes depth edges.
+
+What must hold: the far side of each step line is raised by exactly its height and
+nothing else moves, steps add up, the crack relief is untouched, the ray-cast depth
+across a step changes by the height, and a recipe without steps draws the same
+patch as before (steps are drawn after the size, from the surface stream).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from crackgen.config.recipe import parse_recipe
+from crackgen.config.spec import CrackSpec, SampleSpec, StepSpec, make_spec
+from crackgen.procedural.crackmap import crack_map
+from crackgen.procedural.surface import surface_faces, surface_uvs, surface_vertices, with_steps
+from crackgen.sim.raycast import MeshRaycaster
+
+SPEC = CrackSpec(
+    freq_x=2.0, freq_y=2.5, octaves=4, persistence=0.5, lacunarity=2.0,
+    threshold=0.05, depth_m=0.02, noise_seed=77, offset_u=3.3, offset_v=8.1,
+)  # fmt: skip
+SIZE_M = 1.5
+G = 65
+
+
+def test_the_far_side_is_raised_by_the_height_and_steps_add_up():
+    v = surface_vertices(crack_map(SPEC, 96, SIZE_M, measure=False), G)
+    one = StepSpec(angle_rad=0.0, offset_m=0.1, height_m=0.05)  # x > 0.1 raised
+    two = StepSpec(angle_rad=math.pi / 2, offset_m=-0.2, height_m=0.03)  # y > -0.2 raised
+    s = with_steps(v, [one, two])
+    np.testing.assert_array_equal(s[:, :2], v[:, :2])
+    expect = 0.05 * (v[:, 0] > 0.1) + 0.03 * (v[:, 1] > -0.2)
+    np.testing.assert_allclose(s[:, 2] - v[:, 2], expect, atol=1e-6)
+    assert v[:, 2].min() < 0  # the crack grooves are still there, on both levels
+    np.testing.assert_allclose(s[:, 2][v[:, 0] > 0.1] - 0.05 - 0.03 * (v[:, 1][v[:, 0] > 0.1] > -0.2),
+                               v[:, 2][v[:, 0] > 0.1], atol=1e-6)
+    assert np.array_equal(with_steps(v, []), v) and with_steps(v, [one]) is not v
+
+
+def test_ray_cast_depth_jumps_by_the_step_height():
+    flat = np.zeros((G * G, 3), np.float32)
+    t = np.linspace(-0.5, 0.5, G)
+    flat[:, 0], flat[:, 1] = np.meshgrid(t, t)[0].ravel(), np.meshgrid(t, t)[1].ravel()
+    stepped = with_steps(flat, [StepSpec(angle_rad=0.0, offset_m=0.0, height_m=0.08)])
+    caster = MeshRaycaster(stepped, np.asarray(surface_faces(G)), np.asarray(surface_uvs(G)))
+    xs = np.array([-0.3, -0.1, 0.1, 0.3])
+    origins = np.stack([xs, np.zeros(4), np.full(4, 1.0)], 1)
+    hits = caster.cast(origins, np.tile([0.0, 0.0, -1.0], (4, 1)))
+    np.testing.assert_allclose(hits.t, [1.0, 1.0, 0.92, 0.92], atol=1e-6)
+
+
+def test_steps_are_drawn_after_the_patch_size_and_survive_the_metadata():
+    base = "[dataset]\nseed = 4\n[surface]\nsize_m = { min = 1.0, max = 2.0 }\n"
+    flat = parse_recipe(base)
+    stepped = parse_recipe(base + "steps = { choices = [1, 2] }\nstep_height_m = { min = 0.05, max = 0.1 }\n")
+    for i in range(5):
+        a, b = make_spec(flat, i), make_spec(stepped, i)
+        assert a.surface.steps == [] and 1 <= len(b.surface.steps) <= 2
+        assert a.surface.size_m == b.surface.size_m and a.crack == b.crack and a.camera == b.camera
+        for st in b.surface.steps:
+            assert 0.05 <= st.height_m <= 0.1 and 0 <= st.angle_rad < math.pi
+            assert abs(st.offset_m) <= 0.2 * b.surface.size_m + 1e-12
+        assert SampleSpec.from_dict(b.to_dict()) == b
