@@ -31,19 +31,38 @@ def test_the_far_side_is_raised_by_the_height_and_steps_add_up():
     two = StepSpec(angle_rad=math.pi / 2, offset_m=-0.2, height_m=0.03)  # y > -0.2 raised
     s = with_steps(v, [one, two])
     np.testing.assert_array_equal(s[:, :2], v[:, :2])
-    expect = 0.05 * (v[:, 0] > 0.1) + 0.03 * (v[:, 1] > -0.2)
-    np.testing.assert_allclose(s[:, 2] - v[:, 2], expect, atol=1e-6)
-    assert v[:, 2].min() < 0  # the crack grooves are still there, on both levels
-    np.testing.assert_allclose(s[:, 2][v[:, 0] > 0.1] - 0.05 - 0.03 * (v[:, 1][v[:, 0] > 0.1] > -0.2),
-                               v[:, 2][v[:, 0] > 0.1], atol=1e-6)
-    assert np.array_equal(with_steps(v, []), v) and with_steps(v, [one]) is not v
+    h = SIZE_M / (G - 1)  # vertex spacing: the ramp between the levels is this wide, centred on the line
+    ramp = lambda d: np.clip(d / h + 0.5, 0, 1)  # noqa: E731
+    np.testing.assert_allclose(s[:, 2] - v[:, 2], 0.05 * ramp(v[:, 0] - 0.1) + 0.03 * ramp(v[:, 1] + 0.2), atol=1e-6)
+    far = (v[:, 0] > 0.1 + h / 2) & (v[:, 1] > -0.2 + h / 2)
+    near = (v[:, 0] < 0.1 - h / 2) & (v[:, 1] < -0.2 - h / 2)
+    np.testing.assert_allclose(s[far, 2] - v[far, 2], 0.08, atol=1e-6)  # both steps, full height
+    np.testing.assert_array_equal(s[near, 2], v[near, 2])  # untouched, crack grooves included
+    assert v[:, 2].min() < 0 and np.array_equal(with_steps(v, []), v) and with_steps(v, [one]) is not v
+
+
+def test_a_diagonal_step_is_a_straight_wall_not_a_staircase():
+    flat = surface_vertices(crack_map(SPEC, 96, SIZE_M, measure=False), G) * np.float32([1, 1, 0])
+    st = StepSpec(angle_rad=math.radians(30), offset_m=0.05, height_m=0.1)
+    s = with_steps(flat, [st])
+    n = np.array([math.cos(st.angle_rad), math.sin(st.angle_rad)])
+    t = np.linspace(-0.4, 0.4, 41)  # points along the step line, then a little to either side of it
+    line = st.offset_m * n[None] + t[:, None] * np.array([-n[1], n[0]])[None]
+    caster = MeshRaycaster(s, np.asarray(surface_faces(G)), np.asarray(surface_uvs(G)))
+    down = np.tile([0.0, 0.0, -1.0], (len(t), 1))
+    for off, want, tol in ((0.0, 0.05, 0.015), (-2.0, 0.0, 1e-5), (2.0, 0.1, 1e-5)):  # offsets in vertex spacings
+        p = line + off * SIZE_M / (G - 1) * n[None]
+        z = 1.0 - caster.cast(np.c_[p, np.ones(len(t))], down).t
+        # on the line: mid-height all along it (a per-vertex cut would give 0 or 0.1, a staircase); beyond
+        # two spacings (a triangle spans up to 1.4): exactly the two levels
+        np.testing.assert_allclose(z, want, atol=tol)
 
 
 def test_ray_cast_depth_jumps_by_the_step_height():
     flat = np.zeros((G * G, 3), np.float32)
     t = np.linspace(-0.5, 0.5, G)
     flat[:, 0], flat[:, 1] = np.meshgrid(t, t)[0].ravel(), np.meshgrid(t, t)[1].ravel()
-    stepped = with_steps(flat, [StepSpec(angle_rad=0.0, offset_m=0.0, height_m=0.08)])
+    stepped = with_steps(flat, [StepSpec(angle_rad=0.0, offset_m=0.0, height_m=0.08)], G)
     caster = MeshRaycaster(stepped, np.asarray(surface_faces(G)), np.asarray(surface_uvs(G)))
     xs = np.array([-0.3, -0.1, 0.1, 0.3])
     origins = np.stack([xs, np.zeros(4), np.full(4, 1.0)], 1)
