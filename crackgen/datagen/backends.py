@@ -13,8 +13,10 @@ one registry line.
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import queue as _queue
 import threading
+import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
@@ -88,9 +90,20 @@ def _report(n: int) -> None:
 
 # ---------------------------------------------------------------- local process pool
 
-def _init_local(progress_queue: Any) -> None:
+def _exit_with_parent(parent_pid: int, poll_s: float = 0.5) -> None:
+    """Worker side: end this process once the driver is gone. A driver killed on its own (SIGTERM
+    from a scheduler, -9) would otherwise leave its workers rendering on and writing shards into a
+    dataset that no manifest lists, and a new run into the same folder would race them."""
+    while os.getppid() == parent_pid:
+        time.sleep(poll_s)
+    os._exit(1)
+
+
+def _init_local(progress_queue: Any, parent_pid: int | None = None) -> None:
     global _PROGRESS
     _PROGRESS = progress_queue
+    if parent_pid is not None:
+        threading.Thread(target=_exit_with_parent, args=(parent_pid,), daemon=True, name="exit-with-parent").start()
 
 
 def _local_shard(job: Job, task: ShardTask) -> ShardResult:
@@ -127,7 +140,8 @@ class LocalBackend:
         drainer.start()
         workers = max(1, min(workers, len(tasks)))
         aborted = None
-        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_local, initargs=(q,))
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_local,
+                                   initargs=(q, os.getpid()))
         try:
             pending = {pool.submit(_local_shard, job, t): t for t in tasks}
             while pending:

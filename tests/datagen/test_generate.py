@@ -234,6 +234,28 @@ def test_kill_whole_run_then_resume(reference, tmp_path):
     assert all(r.timings.get("render", 0) > 0 for r in Manifest.load(out).done())
 
 
+def test_workers_exit_when_the_driver_is_killed_alone_then_resume(reference, tmp_path):
+    """A driver killed on its own (SIGTERM from a scheduler) must not leave workers writing shards."""
+    import psutil
+
+    out = tmp_path / "killdriver"
+    proc = cli("generate", str(reference["recipe"]), "--out", str(out), "--workers", "2", "--no-progress")
+    driver = psutil.Process(proc.pid)
+    kids = _wait(lambda: [k for k in driver.children() if "spawn_main" in " ".join(k.cmdline())] if list(
+        out.glob("*.partial")) else None, 240, "workers writing shards")
+    proc.send_signal(signal.SIGTERM)  # the driver only, not its process group
+    proc.wait(timeout=30)
+    _, alive = psutil.wait_procs(kids, timeout=10)
+    assert not alive, f"{len(alive)} worker(s) outlived the driver"
+    before = sorted(p.name for p in out.iterdir())
+    time.sleep(1.0)
+    assert sorted(p.name for p in out.iterdir()) == before  # nothing writes into the dataset any more
+    summary = generate(parse_recipe(TINY), GenerateOptions(out=str(out), workers=2, resume=True, progress=False))
+    assert summary.ok and not list(out.glob("*.partial"))
+    assert_same(content(out), reference["content"])
+    assert_same_bytes(reference["out"], out)
+
+
 def test_truncated_and_corrupted_shards_are_named_and_redone(reference, tmp_path):
     out = tmp_path / "bad"
     shutil.copytree(reference["out"], out)
