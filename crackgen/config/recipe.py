@@ -221,6 +221,7 @@ class SurfaceSection(Section):
     steps: _t(0, 8, integer=True) = _d(0, "straight height steps across the patch (kerb, faulted slab edge): count per sample (integer, 0 = flat)")
     step_height_m: _t(0.001, 1) = _d({"min": 0.02, "max": 0.15}, "height of each step, raised side towards the cameras (m)")
     step_offset: _t(-0.5, 0.5) = _d({"min": -0.2, "max": 0.2}, "signed distance of a step's line from the patch centre (fraction of the side)")
+    step_max_rise: float = Field(0.3, gt=0, le=0.8, description="the steps' total height is scaled down to at most this fraction of the camera's height above the patch (fraction)")
 
 
 class DistractorSection(Section):

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from crackgen.config.recipe import parse_recipe
 from crackgen.config.spec import CrackSpec, SampleSpec, StepSpec, make_spec
@@ -82,3 +83,20 @@ def test_steps_are_drawn_after_the_patch_size_and_survive_the_metadata():
             assert 0.05 <= st.height_m <= 0.1 and 0 <= st.angle_rad < math.pi
             assert abs(st.offset_m) <= 0.2 * b.surface.size_m + 1e-12
         assert SampleSpec.from_dict(b.to_dict()) == b
+
+
+def test_the_steps_total_rise_stays_below_the_camera():
+    text = ("[dataset]\nseed = 2\n[surface]\nsteps = 4\nstep_height_m = { min = 0.2, max = 0.3 }\n"
+            "[camera]\ndistance_m = { min = 0.5, max = 0.7 }\ntilt_deg = { min = 0, max = 40 }\n")
+    capped = parse_recipe(text)
+    looser = parse_recipe(text.replace("steps = 4\n", "steps = 4\nstep_max_rise = 0.8\n"))
+    for i in range(10):
+        spec = make_spec(capped, i)
+        eye = spec.camera.distance_m * math.cos(spec.camera.tilt_rad)
+        hs = np.array([st.height_m for st in spec.surface.steps])
+        assert len(hs) == 4 and hs.sum() == pytest.approx(0.3 * eye)  # 4 x 0.2-0.3 m would reach 0.8-1.2 m
+        wide = np.array([st.height_m for st in make_spec(looser, i).surface.steps])
+        assert wide.sum() == pytest.approx(0.8 * eye)
+        np.testing.assert_allclose(hs / wide, 0.3 / 0.8)  # the same draws, scaled together: proportions kept
+    low = parse_recipe(text.replace("{ min = 0.2, max = 0.3 }", "0.01"))
+    assert [st.height_m for st in make_spec(low, 0).surface.steps] == [0.01] * 4  # under the cap: untouched
