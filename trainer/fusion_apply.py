@@ -25,7 +25,7 @@ from fusion.depth_metrics import disparity_metrics
 from fusion.fusion_inputs import VARIANTS, FusionInputError, build_inputs
 from fusion.postfilter import FILTERS, STAGES, PostFilter, PostFilterError
 from trainer.checkpoint import load_checkpoint
-from trainer.confidence_cnn import ConfidenceCNN
+from trainer.confidence_cnn import THESIS, ConfidenceCNN
 from trainer.errors import TrainerInputError
 from trainer.fusion_train import predict_confidence
 from trainer.imageio import read_float_map, read_rgb
@@ -37,7 +37,7 @@ def load_fusion_model(path: str | Path, device: torch.device) -> tuple[Confidenc
     cfg = ckpt["sample_config"]
     if not isinstance(cfg, dict) or cfg.get("task") != "fusion":
         raise TrainerInputError(f"checkpoint {path} is not a fusion checkpoint (made by cracktrain fusion)")
-    model = ConfidenceCNN(cfg["in_channels"])
+    model = ConfidenceCNN(cfg["in_channels"], tuple(cfg.get("dilations", THESIS)))
     model.load_state_dict(ckpt["model"])
     return model.to(device).eval(), cfg, ckpt
 

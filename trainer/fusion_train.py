@@ -32,7 +32,7 @@ from fusion.densify import METHODS as DENSIFY_METHODS
 from fusion.depth_metrics import disparity_metrics
 from fusion.fusion_inputs import LIDAR_VARIANTS, VARIANTS
 from trainer.checkpoint import load_checkpoint, save_checkpoint
-from trainer.confidence_cnn import IN_CHANNELS, ConfidenceCNN
+from trainer.confidence_cnn import DILATIONS, IN_CHANNELS, ConfidenceCNN, receptive_field
 from trainer.errors import TrainerInputError
 from trainer.fusion_augment import corrupt_scene_stereo, corrupt_stereo
 from trainer.fusion_data import (
@@ -53,7 +53,8 @@ log = logging.getLogger(__name__)
 
 OPTIMIZERS = ("adadelta", "adam")
 RESUME_FIXED_ARGS = {"variant": None, "seed": None, "val_fraction": None, "split_seed": None, "densify": None,
-                     "disp_ref": "none", "stereo_failures": 0.0, "lidar_resample": 0, "other_bm3d": 0.0}  # name -> value assumed for checkpoints made before the option
+                     "disp_ref": "none", "stereo_failures": 0.0, "lidar_resample": 0, "other_bm3d": 0.0,
+                     "dilations": "thesis"}  # name -> value assumed for checkpoints made before the option
 
 
 def add_fusion_args(p: argparse.ArgumentParser) -> None:
@@ -74,6 +75,9 @@ def add_fusion_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--other-bm3d", type=float, default=0.0, metavar="SIGMA",
                    help="BM3D-denoise the densified ToF/LiDAR candidate (noise std SIGMA, disparity px) before the CNN "
                         "sees it and the rules fuse it, in training, fuse and fusion-eval alike; 0 = off (thesis)")
+    p.add_argument("--dilations", choices=tuple(DILATIONS), default="thesis",
+                   help="thesis: the 3x3 layers undilated, a 15 px receptive field; wide: dilated 2,4,8,4,1, 43 px "
+                        "(the same weights and cost), to see across LiDAR scan lines")
     p.add_argument("--disp-ref", choices=DISP_REFS, default="none",
                    help="median: feed disparities relative to the scene's ToF/LiDAR median (scale-free across scenes)")
     p.add_argument("--stereo-failures", type=float, default=0.0, metavar="P",
@@ -127,10 +131,11 @@ def build_optimizer(args: argparse.Namespace, model: torch.nn.Module) -> torch.o
 
 
 def sample_config(variant: str, mean: Sequence[float], std: Sequence[float], densify: str,
-                  disp_ref: str = "none", other_bm3d: float = 0.0) -> dict[str, Any]:
-    """What ``fuse`` and ``fusion-eval`` need to rebuild the inputs exactly as in training."""
+                  disp_ref: str = "none", other_bm3d: float = 0.0, dilations: str = "thesis") -> dict[str, Any]:
+    """What ``fuse`` and ``fusion-eval`` need to rebuild the inputs and the network exactly as in training."""
     return {"task": "fusion", "variant": variant, "in_channels": IN_CHANNELS[variant], "channels": list(VARIANTS[variant]),
-            "mean": list(mean), "std": list(std), "densify": densify, "disp_ref": disp_ref, "other_bm3d": other_bm3d}
+            "mean": list(mean), "std": list(std), "densify": densify, "disp_ref": disp_ref, "other_bm3d": other_bm3d,
+            "dilations": list(DILATIONS[dilations]), "receptive_field_px": receptive_field(DILATIONS[dilations])}
 
 
 def make_batch(scenes: Sequence[FusionScene], args: argparse.Namespace, step: int, mean, std
@@ -202,7 +207,7 @@ def validate(run: FusionRun) -> dict[str, float]:
 def checkpoint_payload(run: FusionRun, step: int, best: dict[str, Any], val_keys: list[str]) -> dict[str, Any]:
     return {"model": run.model.state_dict(), "optimizer": run.optimizer.state_dict(), "step": step,
             "args": vars(run.args), "sample_config": sample_config(run.args.variant, run.mean, run.std, run.args.densify,
-                                                           run.args.disp_ref, run.args.other_bm3d),
+                                                           run.args.disp_ref, run.args.other_bm3d, run.args.dilations),
             "best": best, "val_keys": val_keys, "train_keys": [s.key for s in run.train]}
 
 
@@ -250,7 +255,7 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
     val = load_shard_scenes(args.data, keys=val_keys, **load) if val_keys else []
     mean, std = channel_stats(train, args.disp_ref) if ckpt is None else (ckpt["sample_config"]["mean"], ckpt["sample_config"]["std"])
     torch.manual_seed(args.seed)
-    model = ConfidenceCNN(IN_CHANNELS[args.variant]).to(device)
+    model = ConfidenceCNN(IN_CHANNELS[args.variant], DILATIONS[args.dilations]).to(device)
     optimizer = build_optimizer(args, model)
     start, best = 0, {"val_mae_fused_max": math.inf}
     if ckpt is not None:
