@@ -30,7 +30,7 @@ def bench_live_scene(recipe: Recipe, samples: int = 5, distinct: int = 2, shadow
     for i in range(max(1, distinct)):
         s = make_spec(recipe, i)
         cm = crack_map(s.crack, recipe.surface.crackmap_px, s.surface.size_m, measure=False)
-        prepared.append((s, make_rig(s), with_steps(surface_vertices(cm, recipe.surface.grid_px), s.surface.steps, recipe.surface.grid_px), material_maps(s.material, cm), shadow_alpha(s.shadow, shadow_px)))
+        prepared.append((s, make_rig(s), with_steps(surface_vertices(cm, recipe.surface.grid_px), s.surface.steps), material_maps(s.material, cm), shadow_alpha(s.shadow, shadow_px)))
     max_lights = max(len(p[0].lights) for p in prepared)
     r, c = recipe.render, recipe.camera
     t0 = time.perf_counter()

@@ -172,7 +172,7 @@ class SampleProducer:
         with tm.stage("surface"):
             g = spec.surface.grid_px
             vertices = surface_vertices(cm, g)  # the crack relief alone: what mesh_depth_map measures
-            world = with_steps(vertices, spec.surface.steps, g)  # + height steps: what cameras and sensors see
+            world = with_steps(vertices, spec.surface.steps)  # + height steps: what cameras and sensors see
         with tm.stage("materials"):
             # the normal map carries only the crack depth the mesh cannot hold: the slope counts once
             maps = material_maps(spec.material, cm, mesh_depth_map(vertices, g, spec.material.texture_px))

@@ -114,21 +114,23 @@ def surface_vertices(cm: CrackMap, grid_px: int, sampling: str = "footprint") ->
     return out
 
 
-def with_steps(vertices: np.ndarray, steps, grid_px: int | None = None) -> np.ndarray:
-    """``vertices`` with each ``StepSpec``'s far side raised by its height (+z): kerbs and faulted slab
-    edges. Between the levels the height ramps linearly over one vertex spacing centred on the step
-    line, so the wall is a straight band along the line, not a staircase of grid cells (a hard
-    per-vertex cut zigzags diagonal steps). The crack depths are those of ``vertices``: pass the
-    step-free vertices to ``mesh_depth_map``, these to the renderer and ray caster."""
+def with_steps(vertices: np.ndarray, steps) -> np.ndarray:
+    """``vertices`` (a ``surface_vertices`` grid) with each ``StepSpec``'s far side raised by its height
+    (+z): kerbs and faulted slab edges. Between the levels the height ramps linearly over one vertex
+    spacing centred on the step line, so the wall is a straight band along the line, not a staircase
+    of grid cells (a hard per-vertex cut zigzags diagonal steps). The crack depths are those of
+    ``vertices``: pass the step-free vertices to ``mesh_depth_map``, these to the renderer and ray
+    caster. Without steps ``vertices`` itself is returned (no copy)."""
+    if not steps:
+        return vertices
+    g = _check_grid(int(round(np.sqrt(len(vertices)))))
+    if g * g != len(vertices):
+        raise SurfaceError(f"with_steps: {len(vertices)} vertices are not a square grid")
     out = np.array(vertices, dtype=np.float32, copy=True)
-    g = _check_grid(grid_px if grid_px is not None else int(round(np.sqrt(len(out)))))
-    if g * g != len(out):
-        raise SurfaceError(f"with_steps: {len(out)} vertices are not a {g} x {g} grid")
-    spacing = float(out[:, 0].max() - out[:, 0].min()) / max(g - 1, 1)
+    spacing = float(out[:, 0].max() - out[:, 0].min()) / (g - 1)
     for st in steps:
         dist = out[:, 0] * np.cos(st.angle_rad) + out[:, 1] * np.sin(st.angle_rad) - st.offset_m
-        ramp = np.clip(dist / max(spacing, 1e-12) + 0.5, 0.0, 1.0) if spacing > 0 else (dist > 0).astype(float)
-        out[:, 2] += (st.height_m * ramp).astype(np.float32)
+        out[:, 2] += (st.height_m * np.clip(dist / spacing + 0.5, 0.0, 1.0)).astype(np.float32)
     return out
 
 

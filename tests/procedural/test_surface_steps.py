@@ -63,7 +63,7 @@ def test_ray_cast_depth_jumps_by_the_step_height():
     flat = np.zeros((G * G, 3), np.float32)
     t = np.linspace(-0.5, 0.5, G)
     flat[:, 0], flat[:, 1] = np.meshgrid(t, t)[0].ravel(), np.meshgrid(t, t)[1].ravel()
-    stepped = with_steps(flat, [StepSpec(angle_rad=0.0, offset_m=0.0, height_m=0.08)], G)
+    stepped = with_steps(flat, [StepSpec(angle_rad=0.0, offset_m=0.0, height_m=0.08)])
     caster = MeshRaycaster(stepped, np.asarray(surface_faces(G)), np.asarray(surface_uvs(G)))
     xs = np.array([-0.3, -0.1, 0.1, 0.3])
     origins = np.stack([xs, np.zeros(4), np.full(4, 1.0)], 1)
