@@ -63,6 +63,9 @@ def sgbm_disparity(
     gl, gr = to_grey(left), to_grey(right)
     if gl.shape != gr.shape:
         raise StereoInputError(f"left {gl.shape} and right {gr.shape} images differ in size")
+    if num_disparities + max(min_disparity, 0) >= gl.shape[1]:  # OpenCV asserts, or asks for 2**64 bytes
+        raise StereoInputError(f"num_disparities {num_disparities} (+ min_disparity {min_disparity}) must be "
+                               f"less than the image width {gl.shape[1]} px")
     raw = make_sgbm(num_disparities, block_size, min_disparity).compute(gl, gr)  # int16, 4 fractional bits
     disp = raw.astype(np.float32) / 16.0
     disp[(raw < min_disparity * 16) | (disp <= 0)] = -1.0

@@ -515,6 +515,9 @@ class Recipe(Section):
         if self.stereo.enabled and self.stereo.sgbm_input == "camera" and not self.camera_effects.enabled:
             raise PydanticCustomError("field_ref", "{sub}: \"camera\" needs [camera_effects] enabled = true",
                                       {"sub": "stereo.sgbm_input"})
+        if self.stereo.enabled and self.stereo.num_disparities >= self.camera.width_px:
+            raise PydanticCustomError("field_ref", "{sub}: must be less than {ref} (SGBM searches inside the image)",
+                                      {"sub": "stereo.num_disparities", "ref": "camera.width_px"})
         return self
 
     @property

@@ -54,6 +54,8 @@ def test_roads_is_thesis_scale():
         ("[lights]\nkind = {choices = ['sun'], weights = [1, 2]}", "lights.kind.weights: must have one weight per choice"),
         ("[lidar]\nvfov_min_deg = 10\nvfov_max_deg = 5", "lidar.vfov_max_deg: must be > lidar.vfov_min_deg"),
         ("[stereo]\nblock_size = 4", "stereo.block_size: must be odd"),
+        ("[stereo]\nenabled = true\nnum_disparities = 128\n[camera]\nwidth_px = 128",
+         "stereo.num_disparities: must be less than camera.width_px"),
         ("[render]\ndevice = 'tpu'", "render.device:"),
         ("[dataset]\nsamples = 0", "dataset.samples:"),
         ("this is = = not toml", "not valid TOML"),
@@ -121,6 +123,11 @@ def test_validate_cli_refuses_nan(tmp_path, capsys):
     path.write_text("[crack]\nthreshold = nan\n")
     assert main(["validate", str(path)]) != 0
     assert capsys.readouterr().err.strip() == "crack.threshold: must be a finite number, got nan"
+
+
+def test_search_range_is_checked_only_with_stereo_on():
+    assert parse_recipe("[stereo]\nnum_disparities = 128\n[camera]\nwidth_px = 64").stereo.enabled is False
+    assert parse_recipe("[stereo]\nenabled = true\nnum_disparities = 112\n[camera]\nwidth_px = 128").stereo.enabled
 
 
 def test_every_problem_is_reported_once_per_line():

@@ -102,6 +102,11 @@ def test_bad_stereo_inputs_raise(scene):
         sgbm_disparity(left, right, num_disparities=30)
     with pytest.raises(StereoInputError, match="differ in size"):
         sgbm_disparity(left, right[:-1])
+    w = left.shape[1]
+    nd = ((w - 1) // 16) * 16  # OpenCV itself asserts (or asks for 2**64 bytes) once the search reaches the width
+    with pytest.raises(StereoInputError, match=f"less than the image width {w} px"):
+        sgbm_disparity(left, right, num_disparities=nd, min_disparity=w - nd)
+    sgbm_disparity(left, right, num_disparities=nd, min_disparity=w - nd - 1)  # the widest search OpenCV takes
     st = simulate_stereo(StereoSpec(True, 0.08, 32, 5), rig, left, right, gt, None)
     with pytest.raises(SensorError, match="needs the ToF"):
         st.synth3()
