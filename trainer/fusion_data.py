@@ -30,9 +30,11 @@ import cv2
 import numpy as np
 
 from fusion.fusion_inputs import LIDAR_VARIANTS, VARIANTS, FusionInputError, FusionInputs, build_inputs, replace_lidar
+from fusion.layered_stereo import StereoView
 from fusion.scanline_lidar import random_scanline_lidar
 from fusion.stereo import to_grey
 from trainer.errors import TrainerInputError
+from trainer.fusion_occluders import occluder_scenes
 from trainer.imageio import DEPTH_EXTS, read_float_map
 
 log = logging.getLogger(__name__)
@@ -102,9 +104,10 @@ def resampled_lidar_scenes(scene: FusionScene, sample: dict, copies: int, seed: 
 def load_shard_scenes(path: str | Path, variant: str, keys: Sequence[str] | None = None, densify: str = "normconv",
                       stereo_dir: str | Path | None = None, other_dir: str | Path | None = None,
                       progress: bool = True, lidar_resample: int = 0, seed: int = 0,
-                      other_bm3d: float = 0.0) -> list[FusionScene]:
+                      other_bm3d: float = 0.0, occluders: int = 0) -> list[FusionScene]:
     """All (or ``keys``) samples of a dataset as scenes, in key order; with ``lidar_resample`` K
-    (LiDAR variant) each sample also gives K scenes with a re-drawn LiDAR (``resampled_lidar_scenes``)."""
+    (LiDAR variant) each sample also gives K scenes with a re-drawn LiDAR (``resampled_lidar_scenes``);
+    with ``occluders`` K, K scenes with another sample pasted in front (``trainer.fusion_occluders``)."""
     from tqdm import tqdm
 
     from crackgen.shards import iter_samples, list_shards
@@ -113,18 +116,25 @@ def load_shard_scenes(path: str | Path, variant: str, keys: Sequence[str] | None
         raise TrainerInputError(f"unknown --variant {variant!r}; choose from {', '.join(VARIANTS)}")
     if lidar_resample and variant not in LIDAR_VARIANTS:
         raise TrainerInputError(f"--lidar-resample needs a LiDAR variant ({', '.join(LIDAR_VARIANTS)}), got {variant}")
+    if occluders and variant not in LIDAR_VARIANTS:
+        raise TrainerInputError(f"--occluders needs a LiDAR variant ({', '.join(LIDAR_VARIANTS)}), got {variant}")
     if not Path(path).exists():
         raise TrainerInputError(f"--data {path} does not exist")
     members = {"rgb", "right", "disp_sgm", "disp_gt", *OTHER_MEMBERS[variant]}
     try:
         if not list_shards(path):
             raise TrainerInputError(f"--data {path} holds no shards")
-        scenes = []
+        scenes, views = [], []
         for s in tqdm(iter_samples(path, keys=keys, members=members), desc="fusion inputs",
                       unit="scene", disable=not progress, total=len(keys) if keys is not None else None):
             scenes.append(scene_from_sample(s, variant, densify, stereo_dir, other_dir, other_bm3d))
             if lidar_resample > 0:
                 scenes += resampled_lidar_scenes(scenes[-1], s, lidar_resample, seed, densify, variant, other_bm3d)
+            if occluders > 0:
+                views.append((s["__key__"], StereoView(s["rgb"], s["right"], np.asarray(s["disp_gt"], np.float32))))
+        if occluders > 0:
+            scenes += [FusionScene(key, inp.x, gt, inp.stereo_valid, grey) for key, inp, gt, grey in
+                       occluder_scenes(views, occluders, seed, variant, densify, other_bm3d, progress)]
     except TrainerInputError:
         raise
     except Exception as exc:  # ShardError, CodecError, ManifestError: name the dataset

@@ -54,7 +54,7 @@ log = logging.getLogger(__name__)
 OPTIMIZERS = ("adadelta", "adam")
 RESUME_FIXED_ARGS = {"variant": None, "seed": None, "val_fraction": None, "split_seed": None, "densify": None,
                      "disp_ref": "none", "stereo_failures": 0.0, "lidar_resample": 0, "other_bm3d": 0.0,
-                     "dilations": "thesis"}  # name -> value assumed for checkpoints made before the option
+                     "dilations": "thesis", "occluders": 0}  # name -> value assumed for checkpoints made before the option
 
 
 def add_fusion_args(p: argparse.ArgumentParser) -> None:
@@ -86,6 +86,10 @@ def add_fusion_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lidar-resample", type=int, default=0, metavar="K",
                    help="lidar variant: K more copies of each training scene with a scan-line LiDAR re-drawn from "
                         "the GT at a random density (4-20 rows apart), noise (0.05-1 px) and dropout (0-30%%); 0 = off")
+    p.add_argument("--occluders", type=int, default=0, metavar="K",
+                   help="lidar variants: K more copies of each training scene with another training scene pasted in "
+                        "front inside a random blob, 2-24 px nearer: a depth edge with half-occlusions; SGBM is re-run "
+                        "and the LiDAR re-drawn from the composited GT (trainer.fusion_occluders); 0 = off")
     p.add_argument("--stereo-dir", default=None, help="external stereo disparity per sample: DIR/KEY.{exr,pfm,npy,...}")
     p.add_argument("--other-dir", default=None, help="external ToF/LiDAR disparity (e.g. completed LiDAR) per sample")
     p.add_argument("--val-every", type=int, default=0, help="validate every N steps (0: only at the end)")
@@ -237,6 +241,12 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
                                 f"{args.lidar_resample} with --variant {args.variant}")
     if args.lidar_resample > 0 and args.other_dir:
         raise TrainerInputError("--lidar-resample re-draws the LiDAR from the GT: it cannot be combined with --other-dir")
+    if args.occluders < 0 or (args.occluders > 0 and args.variant not in LIDAR_VARIANTS):
+        raise TrainerInputError(f"--occluders must be >= 0 and needs --variant lidar or lidar4, got "
+                                f"{args.occluders} with --variant {args.variant}")
+    if args.occluders > 0 and (args.other_dir or args.stereo_dir):
+        raise TrainerInputError("--occluders re-runs SGBM and re-draws the LiDAR on composited views: it cannot be "
+                                "combined with --stereo-dir or --other-dir")
     device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
     if device.type == "cuda" and not torch.cuda.is_available():
         raise TrainerInputError("--device cuda but CUDA is not available")
@@ -251,7 +261,8 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
         raise TrainerInputError(f"--other-bm3d must be >= 0 (BM3D sigma in disparity px), got {args.other_bm3d}")
     load = dict(variant=args.variant, densify=args.densify, stereo_dir=args.stereo_dir, other_dir=args.other_dir,
                 progress=progress, other_bm3d=args.other_bm3d)
-    train = load_shard_scenes(args.data, keys=train_keys, lidar_resample=args.lidar_resample, seed=args.seed, **load)
+    train = load_shard_scenes(args.data, keys=train_keys, lidar_resample=args.lidar_resample, seed=args.seed,
+                              occluders=args.occluders, **load)
     val = load_shard_scenes(args.data, keys=val_keys, **load) if val_keys else []
     mean, std = channel_stats(train, args.disp_ref) if ckpt is None else (ckpt["sample_config"]["mean"], ckpt["sample_config"]["std"])
     torch.manual_seed(args.seed)

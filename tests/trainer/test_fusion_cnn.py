@@ -222,3 +222,34 @@ def test_lidar_resample_adds_scenes_with_a_redrawn_lidar_and_the_same_stereo(fus
                      "--no-progress", "--out", str(tmp_path / "tof")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--lidar-resample" in err[0] and not (tmp_path / "tof" / "last.pt").exists()
+
+
+def test_occluders_add_composited_scenes_with_a_nearer_layer_and_exact_gt(fusion_shards, tmp_path, capsys):
+    plain = load_shard_scenes(fusion_shards, "lidar", progress=False)
+    more = load_shard_scenes(fusion_shards, "lidar", progress=False, occluders=1, seed=0)
+    assert len(more) == 2 * len(plain)
+    by_key = {s.key: s for s in more}
+    gts = [s.gt for s in plain]
+    for s in plain:
+        o = by_key[f"{s.key}~occluder0"]
+        behind = np.isclose(o.gt, s.gt)
+        front = ~behind
+        assert 0.05 < front.mean() < 0.5  # a blob of another scene in front ...
+        assert o.gt[front].min() > s.gt.max() + 1.0  # ... at least 2 px nearer than the background's median
+        assert any(np.allclose(o.gt[front] - o.gt[front][0], g[front] - g[front][0], atol=1e-4) for g in gts
+                   if g is not s.gt)  # with another training scene's relief
+        assert not np.array_equal(o.x[..., 0], s.x[..., 0])  # SGBM re-run on the composited pair
+        valid = o.x[..., 1] > 0
+        assert np.median(np.abs(o.x[..., 1] - o.gt)[valid]) < 1.0  # a LiDAR of the composited scene
+    again = load_shard_scenes(fusion_shards, "lidar", progress=False, occluders=1, seed=0)
+    assert all(a.key == b.key and np.array_equal(a.x, b.x) for a, b in zip(more, again))
+    out = tmp_path / "run"
+    assert cli_main(["fusion", "--data", str(fusion_shards), "--variant", "lidar", "--occluders", "1",
+                     "--patch", "16", "-b", "2", "--steps", "2", "--no-progress", "--out", str(out)]) == 0
+    assert cli_main(["fusion", "--data", str(fusion_shards), "--variant", "lidar", "--occluders", "2", "--steps", "3",
+                     "--resume", str(out / "last.pt"), "--no-progress", "--out", str(out)]) == 2
+    assert cli_main(["fusion", "--data", str(fusion_shards), "--occluders", "1", "--steps", "1",
+                     "--no-progress", "--out", str(tmp_path / "tof")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "occluders differ" in err[0] and "--occluders" in err[1]
+    assert not (tmp_path / "tof").exists()
