@@ -40,7 +40,7 @@ RECIPE = Recipe.model_validate(
         "crack": {"threshold": {"min": 0.06, "max": 0.08}, "depth_m": {"min": 0.01, "max": 0.02}},
         "material": {"texture_px": TEX},
         "render": {"samples": 8, "denoise": False, "threads": 2},
-        "stereo": {"enabled": True},
+        "stereo": {"enabled": True, "num_disparities": 32},  # SGBM searches inside the 96 px image
         "lights": {"kind": "sun", "count": 1},
     }
 )
