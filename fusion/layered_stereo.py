@@ -97,10 +97,3 @@ def composite(background: StereoView, foreground: StereoView, mask: np.ndarray, 
     return StereoView(np.clip(np.rint(left), 0, 255).astype(np.uint8),
                       np.clip(np.rint(right), 0, 255).astype(np.uint8), gt)
 
-
-def search_range(gt: np.ndarray, width: int) -> int:
-    """SGBM num_disparities covering the GT's largest disparity, below the image width."""
-    if width <= 16:
-        raise LayeredStereoError(f"SGBM needs an image wider than 16 px, got {width}")
-    top = float(np.max(np.where(valid_values(gt), gt, 0.0)))
-    return int(min(np.ceil(top / 16.0 + 1) * 16, (width - 1) // 16 * 16))

@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 
 from fusion.camera import Camera
+from fusion.densify import valid_values
 from fusion.disparity import depth_to_disparity
 from fusion.projection import project_points
 
@@ -70,6 +71,14 @@ def sgbm_disparity(
     disp = raw.astype(np.float32) / 16.0
     disp[(raw < min_disparity * 16) | (disp <= 0)] = -1.0
     return disp
+
+
+def search_range(gt: np.ndarray, width: int) -> int:
+    """SGBM num_disparities covering a GT disparity's largest value (plus a 16 px margin), below the image width."""
+    if width <= 16:
+        raise StereoInputError(f"SGBM needs an image wider than 16 px, got {width}")
+    top = float(np.max(np.where(valid_values(gt), gt, 0.0)))
+    return int(min(np.ceil(top / 16.0 + 1) * 16, (width - 1) // 16 * 16))
 
 
 def warp_right_to_left(right: np.ndarray, disparity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -15,10 +15,10 @@ from typing import Sequence
 
 import numpy as np
 
-from fusion.fusion_inputs import LIDAR_VARIANTS, FusionInputs, build_inputs
-from fusion.layered_stereo import StereoView, composite, occluder_mask, search_range
+from fusion.fusion_inputs import FusionInputs, build_inputs
+from fusion.layered_stereo import StereoView, composite, occluder_mask
 from fusion.scanline_lidar import random_scanline_lidar
-from fusion.stereo import sgbm_disparity, to_grey
+from fusion.stereo import search_range, sgbm_disparity, to_grey
 from trainer.errors import TrainerInputError
 
 Grey = tuple[np.ndarray, np.ndarray] | None
@@ -47,8 +47,6 @@ def occluder_scenes(views: Sequence[tuple[str, StereoView]], copies: int, seed: 
     of ``views``, drawn with everything else from a Generator seeded by (seed, key, J)."""
     from tqdm import tqdm
 
-    if variant not in LIDAR_VARIANTS:
-        raise TrainerInputError(f"--occluders needs a LiDAR variant ({', '.join(LIDAR_VARIANTS)}), got {variant}")
     if copies > 0 and len(views) < 2:
         raise TrainerInputError(f"--occluders pastes one training scene in front of another: needs at least 2 "
                                 f"training scenes, got {len(views)}")

@@ -14,11 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fusion.densify import valid_values
 from fusion.fusion_inputs import FusionInputError, build_inputs
 from fusion.real_data import RealDataError, load_eth3d_scene, load_middlebury_scene
 from fusion.scanline_lidar import scanline_lidar
-from fusion.stereo import sgbm_disparity
+from fusion.stereo import search_range, sgbm_disparity
 from trainer.errors import TrainerInputError
 from trainer.fusion_data import FusionScene
 
@@ -53,8 +52,7 @@ def real_scene(folder: str | Path, args: argparse.Namespace, densify: str, varia
     if not folder.is_dir():
         raise TrainerInputError(f"--real-stereo {folder} is not a folder")
     left, right, gt = load_real_pair(folder)
-    num = int(np.ceil(np.nanmax(np.where(valid_values(gt), gt, 0)) / 16.0 + 1) * 16)
-    stereo = sgbm_disparity(left, right, num_disparities=num)
+    stereo = sgbm_disparity(left, right, num_disparities=search_range(gt, gt.shape[1]))
     rng = np.random.default_rng(np.random.SeedSequence([args.seed, zlib.crc32(folder.name.encode())]))
     lidar = scanline_lidar(gt, args.lidar_lines, rng, args.lidar_sigma_px, args.lidar_dropout)
     try:

@@ -9,9 +9,8 @@ from fusion.layered_stereo import (
     composite,
     occluder_mask,
     right_view_mask,
-    search_range,
 )
-from fusion.stereo import occluded_from_disparity, sgbm_disparity
+from fusion.stereo import StereoInputError, occluded_from_disparity, search_range, sgbm_disparity
 
 H, W = 96, 160
 
@@ -93,6 +92,6 @@ def test_bad_inputs_raise(scenes):
         composite(bg, StereoView(fg.left[:-1], fg.right, fg.gt), box_mask(), 5.0)
     with pytest.raises(LayeredStereoError, match="GT"):
         composite(bg, StereoView(fg.left, fg.right, np.full((H, W), -1, np.float32)), box_mask(), 5.0)
-    with pytest.raises(LayeredStereoError, match="wider than 16"):
+    with pytest.raises(StereoInputError, match="wider than 16"):
         search_range(bg.gt, 16)
     assert search_range(bg.gt, W) == 32 and search_range(bg.gt + 40, W) == 80 and search_range(bg.gt + 200, W) == 144
