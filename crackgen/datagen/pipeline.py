@@ -31,7 +31,7 @@ import numpy as np
 import crackgen
 from crackgen.config.recipe import Recipe
 from crackgen.config.spec import SampleSpec, make_spec, pixel_footprint_m
-from crackgen.datagen.heap import release_free_heap
+from crackgen.datagen.heap import configure_heap, release_free_heap
 from crackgen.errors import CrackgenError
 from crackgen.postrender.stage import adapt_members, camera_effects_members
 from crackgen.postrender.targets import TargetPhotos
@@ -100,6 +100,7 @@ class SampleProducer:
     """Turns sample indices of one recipe into shard members; one per worker process."""
 
     def __init__(self, recipe: Recipe, threads: int = 0, keep_linear: bool = False):
+        configure_heap()  # fixed glibc thresholds: flat worker memory (crackgen/datagen/heap.py)
         self.recipe = recipe
         self.threads = int(threads)
         self.keep_linear = bool(keep_linear)  # keep the scene-linear render on the Sample (crackgen bench --sweep)

@@ -16,6 +16,7 @@ from crackgen.blender.render import RenderSettings, apply_settings, configure_sc
 from crackgen.blender.scene import LiveScene, SceneUpdateError  # noqa: E402
 from crackgen.config.recipe import Recipe  # noqa: E402
 from crackgen.config.spec import RENDER_KNOBS, make_spec  # noqa: E402
+from crackgen.datagen.heap import heap_info  # noqa: E402
 from crackgen.procedural.crackmap import crack_map  # noqa: E402
 from crackgen.procedural.materials import material_maps  # noqa: E402
 from crackgen.procedural.surface import surface_vertices  # noqa: E402
@@ -239,18 +240,10 @@ def test_real_build_behaves_like_the_mock():
 
 def _malloc_mb() -> float:
     """Bytes the C heap holds in use (arena + mmapped chunks), glibc only."""
-    import ctypes
-
-    class MallInfo2(ctypes.Structure):
-        _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks",
-                                                   "fsmblks", "uordblks", "fordblks", "keepcost")]
-    try:
-        fn = ctypes.CDLL("libc.so.6").mallinfo2
-    except (OSError, AttributeError):
+    info = heap_info()
+    if info is None:
         pytest.skip("needs glibc's mallinfo2")
-    fn.restype = MallInfo2
-    m = fn()
-    return (m.uordblks + m.hblkhd) / 2**20
+    return (info["uordblks"] + info["hblkhd"]) / 2**20
 
 
 @pytest.mark.slow
