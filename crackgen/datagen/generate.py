@@ -20,6 +20,7 @@ from typing import Any, Callable, Mapping
 from crackgen.config.recipe import Recipe, RecipeError
 from crackgen.config.recipe_compat import resume_check
 from crackgen.datagen.backends import BACKENDS, Job, worker_versions
+from crackgen.datagen.heap import HeapSettingError, mmap_threshold_from_env
 from crackgen.datagen.tasks import ShardResult, ShardTask
 from crackgen.errors import CrackgenError
 from crackgen.postrender.targets import TargetError, TargetPhotos
@@ -203,7 +204,11 @@ class GenerateOptions:
 
 def check_inputs(recipe: Recipe) -> None:
     """Files the recipe points to, checked before any rendering: the [adapt] target photos and the
-    photo family's folder (when the family distribution can draw "photo")."""
+    photo family's folder (when the family distribution can draw "photo"), and CRACKGEN_MMAP_THRESHOLD."""
+    try:
+        mmap_threshold_from_env()
+    except HeapSettingError as exc:
+        raise GenerateError(str(exc)) from None
     if recipe.adapt.enabled:
         try:
             TargetPhotos(recipe.adapt.target)

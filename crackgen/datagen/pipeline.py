@@ -100,7 +100,7 @@ class SampleProducer:
     """Turns sample indices of one recipe into shard members; one per worker process."""
 
     def __init__(self, recipe: Recipe, threads: int = 0, keep_linear: bool = False):
-        configure_heap()  # fixed glibc thresholds: flat worker memory (crackgen/datagen/heap.py)
+        configure_heap()  # CRACKGEN_MMAP_THRESHOLD, when set: fixed glibc thresholds (crackgen/datagen/heap.py)
         self.recipe = recipe
         self.threads = int(threads)
         self.keep_linear = bool(keep_linear)  # keep the scene-linear render on the Sample (crackgen bench --sweep)

@@ -106,6 +106,7 @@ def _cmd_bench_sweep(args: argparse.Namespace, recipe) -> int:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
+    from crackgen.datagen.heap import HeapSettingError, mmap_threshold_from_env
     from crackgen.tools.bench import bench, format_table
 
     recipe = _load(args.recipe)
@@ -113,6 +114,10 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     if args.samples < 1:
         return _err(f"--samples must be >= 1, got {args.samples}")
+    try:
+        mmap_threshold_from_env()
+    except HeapSettingError as exc:
+        return _err(str(exc))
     if args.sweep or args.combo:
         return _cmd_bench_sweep(args, recipe)
     result = bench(recipe, samples=args.samples, threads=args.threads, progress=not args.json)
