@@ -11,7 +11,8 @@ read-back) in its arenas. Two mechanisms made a worker's RSS grow although nothi
   thresholds instead. It trades speed for memory, so it is off by default: over 500 roads samples at
   4 MiB the growth from the warm-up fell from 95 to 71 MB (256 KiB: 52 MB), but re-mapping and
   faulting in blocks costs time (32 spp, same hour: 1.25 s per sample outside Cycles at 4 MiB against
-  1.10 s unset; 0.26 s more than unset at 256 KiB, 4 spp). A slow drift of about 2 MB per 100 samples remains either way.
+  1.10 s unset; 0.26 s more than unset at 256 KiB, 4 spp). A slow drift of about 2 MB per 100 samples
+  remains either way.
 """
 
 from __future__ import annotations
@@ -53,6 +54,11 @@ def mmap_threshold_from_env(environ: Mapping[str, str] | None = None) -> int | N
     return value or None
 
 
+class _MallInfo2(ctypes.Structure):
+    _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks",
+                                               "fsmblks", "uordblks", "fordblks", "keepcost")]
+
+
 @functools.lru_cache(maxsize=1)
 def _libc():
     """glibc, or None on other C libraries (macOS, musl, Windows)."""
@@ -65,6 +71,8 @@ def _libc():
         lib.malloc_trim.restype = ctypes.c_int
         lib.mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
         lib.mallopt.restype = ctypes.c_int
+        if hasattr(lib, "mallinfo2"):  # glibc >= 2.33
+            lib.mallinfo2.restype = _MallInfo2
     except (OSError, AttributeError):
         return None
     return lib
@@ -82,20 +90,13 @@ def configure_heap(environ: Mapping[str, str] | None = None) -> int | None:
     return threshold
 
 
-class _MallInfo2(ctypes.Structure):
-    _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks",
-                                               "fsmblks", "uordblks", "fordblks", "keepcost")]
-
-
 def heap_info() -> dict[str, int] | None:
     """glibc's ``mallinfo2`` in bytes (``arena``: arena size, ``hblkhd``: mmapped blocks, ``uordblks``: in use,
     ``fordblks``: free), or None without it: where a worker's memory sits, for tests and probes."""
     lib = _libc()
-    fn = getattr(lib, "mallinfo2", None) if lib is not None else None
-    if fn is None:
+    if lib is None or not hasattr(lib, "mallinfo2"):
         return None
-    fn.restype = _MallInfo2
-    m = fn()
+    m = lib.mallinfo2()
     return {name: int(getattr(m, name)) for name, _ in _MallInfo2._fields_}
 
 

@@ -1,4 +1,5 @@
-"""The worker heap stays flat: freed pages go back (malloc_trim) and large blocks never settle in the arenas."""
+"""The worker heap stays flat: freed pages go back (malloc_trim), and with CRACKGEN_MMAP_THRESHOLD large blocks
+never settle in the arenas."""
 
 import sys
 from pathlib import Path
