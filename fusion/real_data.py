@@ -5,6 +5,10 @@ depth float32 with -1 = no value (Middlebury 0, ETH3D inf, rig PNG 0 all map to
 -1), RGB uint8 in RGB order, grey uint8. A missing or unreadable file raises
 ``RealDataError`` naming the file.
 
+Middlebury 2014 "Motorcycle" (Scharstein et al., GCPR 2014) at quarter size ships inside
+scikit-image (``skimage.data.stereo_motorcycle``), so ``load_skimage_motorcycle`` gives a
+third real scene with GT disparity that needs neither a download nor a copy here.
+
 ETH3D two-view: ``calib.txt`` gives cam0/cam1 K (pixels), ``baseline`` in mm
 and ``doffs`` = cx1 - cx0 (pixels), so Z = f * B / (d + doffs). The playground
 scene has doffs = 0 and identical K for both views.
@@ -184,6 +188,23 @@ def load_eth3d_scene(folder: Path) -> dict:
         raise RealDataError(f"{folder}: disp0 {disp.shape}, im0 {left.shape} and calib {calib.height}x{calib.width} disagree")
     depth = disparity_to_depth(disp, calib.focal_px, calib.baseline_m, calib.doffs_px)
     return {"left": left, "right": right, "disp_left": disp, "calib": calib, "depth_left": depth}
+
+
+SKIMAGE_MOTORCYCLE = "skimage:motorcycle"  # the --real-stereo name of scikit-image's bundled pair
+SKIMAGE_MOTORCYCLE_SCENE = "middlebury2014_motorcycle"
+
+
+def load_skimage_motorcycle() -> dict:
+    """Middlebury 2014 Motorcycle, 741x500 (scikit-image's copy): RGB + grey views, disp_left (-1 = none)."""
+    try:
+        from skimage import data
+        left, right, disp = data.stereo_motorcycle()
+    except (ImportError, OSError, ValueError) as exc:
+        raise RealDataError(f"{SKIMAGE_MOTORCYCLE}: scikit-image's stereo_motorcycle is unavailable ({exc})") from None
+    disp = np.asarray(disp, np.float32).copy()
+    disp[~(np.isfinite(disp) & (disp > 0))] = -1.0
+    return {"left_rgb": left, "right_rgb": right, "disp_left": disp,
+            "left": cv2.cvtColor(left, cv2.COLOR_RGB2GRAY), "right": cv2.cvtColor(right, cv2.COLOR_RGB2GRAY)}
 
 
 def rig_depth_camera(width: int = 512, height: int = 424) -> Camera:

@@ -173,6 +173,30 @@ def test_real_stereo_scene_has_lidar_inputs_and_gt():
         real_scene(REAL_CONES.parent, args, "normconv")
 
 
+def test_skimage_motorcycle_is_a_real_stereo_scene_with_gt():
+    """scikit-image's bundled Middlebury 2014 pair loads without files here, and its GT is a disparity: the
+    left view matches the right view shifted by it."""
+    from fusion.real_data import load_skimage_motorcycle
+    from trainer.fusion_real import real_scene
+
+    s = load_skimage_motorcycle()
+    gt, left, right = s["disp_left"], s["left"].astype(np.float32), s["right"].astype(np.float32)
+    assert gt.shape == left.shape == (500, 741) and 0.85 < (gt > 0).mean() < 0.99
+    ys, xs = np.nonzero(gt > 0)
+    xr = np.rint(xs - gt[ys, xs]).astype(int)
+    ok = xr >= 0
+    err_gt = np.abs(left[ys[ok], xs[ok]] - right[ys[ok], xr[ok]]).mean()
+    err_shifted = np.abs(left[ys[ok], xs[ok]] - right[ys[ok], np.clip(xr[ok] + 8, 0, 740)]).mean()
+    assert err_gt < 0.5 * err_shifted  # the GT disparity registers the views; 8 px off it does not
+
+    args = argparse.Namespace(lidar_lines=16, lidar_sigma_px=0.25, lidar_dropout=0.1, seed=0)
+    scene = real_scene("skimage:motorcycle", args, "normconv")
+    assert scene.key == "middlebury2014_motorcycle" and scene.x.shape == (500, 741, 3)
+    assert np.median(np.abs(scene.x[..., 1] - scene.gt)[scene.gt > 0]) < 1.0
+    with pytest.raises(TrainerInputError, match="not a folder"):
+        real_scene("skimage:nothing", args, "normconv")
+
+
 def test_filled_stereo_holes_take_the_other_sensor_unless_asked(fusion_shards):
     from fusion.fusion_inputs import build_inputs
     from trainer.fusion_apply import fuse_scene
