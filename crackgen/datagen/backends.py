@@ -7,6 +7,11 @@ bar moves per sample, not per shard. A worker killed with -9 breaks the local po
 the driver sees ``BrokenProcessPool``, stops, and returns a one-line reason: the
 manifest then lists only finished shards and ``--resume`` redoes the rest.
 
+``Job.max_shards_per_worker`` (``generate --worker-max-shards K``) replaces a worker
+process with a fresh one after K shards: native libraries (Cycles, Embree) keep memory
+that no allocator setting returns (crackgen/datagen/heap.py), so this bounds a long
+run's RSS at what one worker reaches in K shards, for one scene build per K shards.
+
 ``generate`` picks a back end from ``BACKENDS`` by name; adding one is one class and
 one registry line.
 """
@@ -17,6 +22,7 @@ import os
 import queue as _queue
 import threading
 import time
+from collections import deque
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
@@ -41,6 +47,7 @@ class Job:
     out: str
     threads: int
     storage_options: dict[str, Any] = field(default_factory=dict)
+    max_shards_per_worker: int = 0  # a fresh worker process after this many shards; 0 = keep it
 
 
 class Backend(Protocol):
@@ -133,30 +140,50 @@ class LocalBackend:
 
     def run(self, job: Job, tasks: list[ShardTask], workers: int, on_result: ResultFn,
             on_sample: SampleFn) -> str | None:
+        """One single-process pool per worker slot ("lane"), each fed the next shard when it is free;
+        a lane's pool is replaced after ``job.max_shards_per_worker`` shards. (Python 3.11's own
+        ``max_tasks_per_child`` hangs with the spawn context, so the recycling is done here.)"""
         ctx = mp.get_context("spawn")  # fork would copy a half-initialised bpy/OpenMP state
         q = ctx.Queue()
         stop = threading.Event()
         drainer = threading.Thread(target=_drain, args=(q, on_sample, stop), daemon=True)
         drainer.start()
-        workers = max(1, min(workers, len(tasks)))
+        todo = deque(tasks)
+
+        def new_pool() -> ProcessPoolExecutor:
+            return ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=_init_local,
+                                       initargs=(q, os.getpid()))
+
+        lanes = [_Lane(new_pool()) for _ in range(max(1, min(workers, len(tasks))))]
+        pending: dict[Any, tuple[ShardTask, _Lane]] = {}
+
+        def feed(lane: _Lane) -> None:
+            if todo:
+                task = todo.popleft()
+                pending[lane.pool.submit(_local_shard, job, task)] = (task, lane)
+
         aborted = None
-        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_local,
-                                   initargs=(q, os.getpid()))
         try:
-            pending = {pool.submit(_local_shard, job, t): t for t in tasks}
-            while pending:
+            for lane in lanes:
+                feed(lane)
+            while pending and aborted is None:
                 done, _ = wait(pending, return_when=FIRST_COMPLETED)
                 for fut in done:
-                    task = pending.pop(fut)
+                    task, lane = pending.pop(fut)
                     try:
                         on_result(fut.result())
                     except BrokenProcessPool:
                         aborted = (f"a worker process died (killed or out of memory) while shard {task.index} "
-                                   f"was running; {len(pending) + 1} shards unfinished")
-                        pending.clear()
+                                   f"was running; {len(pending) + len(todo) + 1} shards unfinished")
                         break
+                    lane.shards += 1
+                    if job.max_shards_per_worker and lane.shards >= job.max_shards_per_worker and todo:
+                        lane.pool.shutdown(wait=True)  # its only process is idle: let it exit
+                        lane.pool, lane.shards = new_pool(), 0
+                    feed(lane)
         finally:
-            pool.shutdown(wait=aborted is None, cancel_futures=True)
+            for lane in lanes:
+                lane.pool.shutdown(wait=aborted is None, cancel_futures=True)
             stop.set()
             drainer.join(timeout=5)
             q.close()
@@ -165,6 +192,14 @@ class LocalBackend:
             else:
                 q.cancel_join_thread()  # a killed worker may have left the pipe mid-message
         return aborted
+
+
+@dataclass
+class _Lane:
+    """One worker slot of the local back end: its pool (one process) and the shards that process ran."""
+
+    pool: ProcessPoolExecutor
+    shards: int = 0
 
 
 # ---------------------------------------------------------------- Ray
@@ -200,7 +235,8 @@ class RayBackend:
             started = True
         try:
             progress = Queue()
-            remote = ray.remote(num_cpus=1, max_retries=1)(_ray_shard)
+            # max_calls: Ray replaces the worker process after that many shards (0 = never)
+            remote = ray.remote(num_cpus=1, max_retries=1, max_calls=job.max_shards_per_worker)(_ray_shard)
             refs = {remote.remote(job, t, progress): t for t in tasks}
             aborted = None
             while refs:

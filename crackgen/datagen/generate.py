@@ -167,6 +167,7 @@ class Summary:
     redone: list[str] = field(default_factory=list)
     aborted: str | None = None  # e.g. a worker died
     timings: dict[str, float] = field(default_factory=dict)
+    worker_processes: int = 0  # distinct worker processes that finished shards (more with --worker-max-shards)
 
     @property
     def ok(self) -> bool:
@@ -177,7 +178,8 @@ class Summary:
         out = [
             f"{self.samples} samples in {self.shards} shards ({self.skipped_shards} already done), "
             f"{self.bytes / 1e6:.1f} MB, {self.wall_s:.1f} s ({rate:.2f} samples/s)",
-            f"failures: {len(self.failures)} samples, {len(self.shard_errors)} shards",
+            f"failures: {len(self.failures)} samples, {len(self.shard_errors)} shards; "
+            f"{self.worker_processes} worker process{'es' if self.worker_processes != 1 else ''}",
             f"output: {self.out}",
         ]
         out += [f"  failed {f['key']}: {f['error']}" for f in self.failures[:20]]
@@ -200,6 +202,7 @@ class GenerateOptions:
     resume: bool = False
     storage_options: dict[str, Any] = field(default_factory=dict)
     progress: bool = True
+    worker_max_shards: int = 0  # replace a worker process after this many shards (0 = never)
 
 
 def check_inputs(recipe: Recipe) -> None:
@@ -231,6 +234,8 @@ def generate(recipe: Recipe, opts: GenerateOptions, log: Callable[[str], None] |
         raise GenerateError(f"--backend must be one of {', '.join(BACKENDS)}, got {opts.backend!r}")
     if opts.workers < 1:
         raise GenerateError(f"--workers must be >= 1, got {opts.workers}")
+    if opts.worker_max_shards < 0:
+        raise GenerateError(f"--worker-max-shards must be >= 0 (0 = never replace a worker), got {opts.worker_max_shards}")
     recipe = effective_recipe(recipe, opts.samples)
     check_inputs(recipe)
     manifest, todo, notes = prepare_output(recipe, opts.out, opts.resume, opts.storage_options,
@@ -246,7 +251,12 @@ def generate(recipe: Recipe, opts: GenerateOptions, log: Callable[[str], None] |
     bar = _bar(total, opts.progress)
     t0 = time.perf_counter()
 
+    pids: set[int] = set()
+
     def on_result(res: ShardResult) -> None:
+        if res.worker_pid:
+            pids.add(res.worker_pid)
+            summary.worker_processes = len(pids)
         if res.info is None:
             manifest.mark_failed(res.index, res.failures + [{"key": "*", "error": res.error or "unknown"}])
             summary.shard_errors.append(f"shard {res.index}: {res.error}")
@@ -261,7 +271,8 @@ def generate(recipe: Recipe, opts: GenerateOptions, log: Callable[[str], None] |
             summary.timings[k] = summary.timings.get(k, 0.0) + v
         manifest.save()
 
-    job = Job(recipe_text=recipe.text, out=opts.out, threads=threads, storage_options=dict(opts.storage_options))
+    job = Job(recipe_text=recipe.text, out=opts.out, threads=threads, storage_options=dict(opts.storage_options),
+              max_shards_per_worker=opts.worker_max_shards)
     try:
         summary.aborted = make_backend(opts.ray_address).run(job, todo, opts.workers, on_result, bar.update)
     finally:

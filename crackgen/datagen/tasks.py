@@ -9,6 +9,7 @@ and the driver records them in the manifest, which is not part of any shard's sh
 """
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Protocol
@@ -36,6 +37,7 @@ class ShardResult:
     failures: list[dict[str, str]] = field(default_factory=list)  # {key, error} per failed sample
     timings: dict[str, float] = field(default_factory=dict)  # per-stage seconds summed over the shard
     error: str | None = None  # shard-level failure (nothing written)
+    worker_pid: int = 0  # the process that ran it (how many processes a run used, with worker recycling)
 
 
 class ProducedSample(Protocol):
@@ -101,5 +103,5 @@ def run_shard(producer: SampleSource, out: str, task: ShardTask, storage_options
                     on_sample(1)
         info = writer.info.to_dict()
     except Exception as exc:  # noqa: BLE001
-        return ShardResult(task.index, None, failures, totals, error=one_line(exc))
-    return ShardResult(task.index, info, failures, totals)
+        return ShardResult(task.index, None, failures, totals, error=one_line(exc), worker_pid=os.getpid())
+    return ShardResult(task.index, info, failures, totals, worker_pid=os.getpid())

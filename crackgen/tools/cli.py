@@ -61,7 +61,7 @@ def _cmd_generate(args: argparse.Namespace) -> int:
         opts = GenerateOptions(
             out=args.out, workers=args.workers, backend=args.backend, ray_address=args.ray_address,
             samples=args.samples, resume=args.resume, storage_options=parse_storage_options(args.storage_options),
-            progress=not args.no_progress,
+            progress=not args.no_progress, worker_max_shards=args.worker_max_shards,
         )
         summary = generate(recipe, opts)
     except GenerateError as exc:
@@ -231,6 +231,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--resume", action="store_true", help="continue a dataset: keep verified shards, redo the rest")
     g.add_argument("--storage-options", default=None,
                    help="fsspec storage options as JSON (default: $CRACKGEN_STORAGE_OPTIONS)")
+    g.add_argument("--worker-max-shards", type=int, default=0, metavar="K",
+                   help="replace each worker process with a fresh one after K shards, so a long run's memory "
+                        "stays at what one worker reaches in K shards (0 = never, the default)")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
     g.add_argument("--json", action="store_true", help="print the summary as JSON")
     g.set_defaults(func=_cmd_generate)

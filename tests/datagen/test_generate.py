@@ -22,7 +22,7 @@ import pytest
 from tiny_recipes import tiny_recipe
 
 from crackgen.config.recipe import parse_recipe
-from crackgen.datagen.generate import GenerateOptions, effective_recipe, generate, plan_shards
+from crackgen.datagen.generate import GenerateError, GenerateOptions, effective_recipe, generate, plan_shards
 from crackgen.datagen.pipeline import Sample
 from crackgen.datagen.tasks import ShardTask, run_shard
 from crackgen.shards import iter_samples, verify_dataset
@@ -161,6 +161,20 @@ def test_two_workers_give_byte_identical_shards(reference, tmp_path):
     assert summary.ok
     assert_same(content(tmp_path / "w2"), reference["content"])
     assert_same_bytes(reference["out"], tmp_path / "w2")
+
+
+def test_worker_replaced_after_each_shard_gives_byte_identical_shards(reference, tmp_path):
+    """--worker-max-shards 1: every shard runs in a fresh process (3 shards, 3 processes on one worker
+    slot), and a rebuilt scene renders exactly what the reused one did."""
+    summary = generate(parse_recipe(TINY), GenerateOptions(out=str(tmp_path / "fresh"), workers=1, progress=False,
+                                                           worker_max_shards=1))
+    assert summary.ok and summary.worker_processes == 3
+    assert reference["summary"].worker_processes == 1  # without it one process does every shard
+    assert_same(content(tmp_path / "fresh"), reference["content"])
+    assert_same_bytes(reference["out"], tmp_path / "fresh")
+    with pytest.raises(GenerateError, match="--worker-max-shards"):
+        generate(parse_recipe(TINY), GenerateOptions(out=str(tmp_path / "bad"), worker_max_shards=-1, progress=False))
+    assert not (tmp_path / "bad").exists()
 
 
 # ---------------------------------------------------------------- crashes and resume

@@ -80,3 +80,15 @@ def test_ray_backend_writes_to_s3(s3):
     again = generate(recipe, GenerateOptions(out=url, workers=2, backend="ray", resume=True,
                                              storage_options=s3, progress=False))
     assert again.ok and again.shards == 0 and again.skipped_shards == 2
+
+
+def test_ray_worker_replaced_after_each_shard(tmp_path):
+    """--worker-max-shards reaches Ray as max_calls: on one CPU, two shards run in two worker processes."""
+    pytest.importorskip("ray")
+    from crackgen.config.recipe import parse_recipe
+    from crackgen.datagen.generate import GenerateOptions, generate
+
+    summary = generate(parse_recipe(RECIPE), GenerateOptions(out=str(tmp_path / "ds"), workers=1, backend="ray",
+                                                             worker_max_shards=1, progress=False))
+    assert summary.ok, summary.lines()
+    assert summary.shards == 2 and summary.worker_processes == 2
