@@ -99,10 +99,12 @@ class RealFolder:
             missing = sorted(set(self.stems) - set(found))
             if missing:
                 raise TrainerInputError(f"{img_root}: no image for stems {missing[:5]}")
-            found = {s: found[s] for s in sorted(self.stems)}
+            found = {s: found[s] for s in self.stems}
         if not found:
             raise TrainerInputError(f"{img_root}: no images ({', '.join(IMAGE_EXTS)})")
-        self._images = found
+        # Stem order, with or without ``stems``: a split folder ("a.jpg" after "a-1.jpg" by file name)
+        # then draws the same samples as the same stems picked from the whole folder.
+        self._images = dict(sorted(found.items()))
         if self.require_masks and not (self.root / self.mask_dir).is_dir():
             raise TrainerInputError(f"real folder {self.root}: no '{self.mask_dir}/' subfolder")
         self._has_ignore = bool(self.require_masks and self.ignore_dir and (self.root / self.ignore_dir).is_dir())

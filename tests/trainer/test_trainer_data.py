@@ -33,6 +33,28 @@ def test_deepcrack_folder_shapes_and_binary_masks():
     assert items[0]["image"].shape == (3, 384, 544) and set(items[0]["mask"].unique().tolist()) <= {0.0, 1.0}
 
 
+def test_split_folder_keeps_the_stem_order_of_the_same_stems_in_the_whole_folder(tmp_path):
+    """'a.png' sorts after 'a-1.png' by file name but before it by stem: both ways of naming a
+    training split must list (and so draw) its samples in one order."""
+    import argparse
+
+    from trainer.split import run_split
+
+    src = tmp_path / "src"
+    (src / "images").mkdir(parents=True)
+    (src / "masks").mkdir()
+    img, m = np.full((8, 8, 3), 128, np.uint8), np.zeros((8, 8), np.uint8)
+    for stem in ("a", "a-1", "a-2", "b", "b-1", "c"):
+        cv2.imwrite(str(src / "images" / f"{stem}.png"), img)
+        cv2.imwrite(str(src / "masks" / f"{stem}.png"), m)
+    ns = argparse.Namespace(source=str(src), out=str(tmp_path / "split"), test_fraction=0.34, seed=0,
+                            image_dir="images", mask_dir="masks", mask_suffix="", extra_dir=[])
+    split = run_split(ns)
+    whole = RealFolder(src, stems=split["train"]).keys
+    assert RealFolder(tmp_path / "split" / "train").keys == whole == sorted(split["train"])
+    assert RealFolder(src).keys == ["a", "a-1", "a-2", "b", "b-1", "c"]
+
+
 def test_disparity_to_depth_and_nearest_alignment_without_bleeding():
     f, B = 100.0, 0.1
     disp = np.linspace(2.0, 20.0, 20 * 30, dtype=np.float32).reshape(20, 30)
