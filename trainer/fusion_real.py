@@ -42,21 +42,21 @@ def add_real_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--seed", type=int, default=0)
 
 
-def load_real_pair(folder: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(left, right, GT disparity with -1 = none) of a Middlebury or ETH3D folder, or scikit-image's pair."""
+def load_real_pair(folder: str | Path) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
+    """(scene name, left, right, GT disparity with -1 = none) of a Middlebury or ETH3D folder, or scikit-image's pair."""
     try:
         if str(folder) == SKIMAGE_MOTORCYCLE:
             s = load_skimage_motorcycle()
-            return s["left_rgb"], s["right_rgb"], s["disp_left"]
+            return SKIMAGE_MOTORCYCLE_SCENE, s["left_rgb"], s["right_rgb"], s["disp_left"]
         folder = Path(folder)
         if not folder.is_dir():
             raise TrainerInputError(f"--real-stereo {folder} is not a folder (or {SKIMAGE_MOTORCYCLE})")
         if (folder / "disp0.pfm").is_file():
             s = load_eth3d_scene(folder)
-            return s["left"], s["right"], s["disp_left"]
+            return folder.name, s["left"], s["right"], s["disp_left"]
         if (folder / "disp_left.tif").is_file():
             s = load_middlebury_scene(folder)
-            return s["left_rgb"], s["right_rgb"], s["disp_left"]
+            return folder.name, s["left_rgb"], s["right_rgb"], s["disp_left"]
     except RealDataError as exc:
         raise TrainerInputError(str(exc)) from None
     raise TrainerInputError(f"--real-stereo {folder}: neither ETH3D/Middlebury 2014 (disp0.pfm) nor Middlebury 2003 "
@@ -65,8 +65,7 @@ def load_real_pair(folder: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarr
 
 def real_scene(folder: str | Path, args: argparse.Namespace, densify: str, variant: str = "lidar",
                other_bm3d: float = 0.0) -> FusionScene:
-    name = SKIMAGE_MOTORCYCLE_SCENE if str(folder) == SKIMAGE_MOTORCYCLE else Path(folder).name
-    left, right, gt = load_real_pair(folder)
+    name, left, right, gt = load_real_pair(folder)
     stereo = sgbm_disparity(left, right, num_disparities=search_range(gt, gt.shape[1]))
     rng = np.random.default_rng(np.random.SeedSequence([args.seed, zlib.crc32(name.encode())]))
     lidar = scanline_lidar(gt, args.lidar_lines, rng, args.lidar_sigma_px, args.lidar_dropout)
