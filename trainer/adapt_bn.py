@@ -15,7 +15,7 @@ import torch
 
 from trainer.checkpoint import load_checkpoint, save_checkpoint
 from trainer.errors import TrainerInputError
-from trainer.evaluate import load_model
+from trainer.scoring import load_model
 from trainer.site_adapt import targets_from_folder
 from trainer.target_bn import DEFAULT_BATCHES, adapt_bn_to_photos
 

@@ -21,7 +21,8 @@ from trainer.depth import (
     RELIEF_METHODS,
 )
 from trainer.errors import TrainerInputError
-from trainer.sources import DEFAULT_MASK_MEMBER, SPARSE_DEPTHS, RealFolder, ShardSource, split_fraction
+from trainer.real_split import DEFAULT_GROUP_PATTERN, RealSplit, split_groups
+from trainer.sources import DEFAULT_MASK_MEMBER, SPARSE_DEPTHS, RealFolder, ShardSource
 from trainer.stream import SegStream
 
 
@@ -59,6 +60,27 @@ def add_data_args(p: argparse.ArgumentParser) -> None:
                    help=f"label member of synthetic shards (default {DEFAULT_MASK_MEMBER}; e.g. mask_thesis.png)")
     g.add_argument("--size", type=int, default=None, help="resize the shorter image side to this (px) first")
     g.add_argument("--skip-bad", action="store_true", help="log and skip unreadable/mismatched samples")
+
+
+def add_split_args(p: argparse.ArgumentParser, *, val_fraction: float, test_fraction: float | None) -> None:
+    """How a real folder is split (``trainer.real_split``): by group, seeded, train / validation / test."""
+    g = p.add_argument_group("grouped split of a real folder")
+    g.add_argument("--val-fraction", type=float, default=val_fraction,
+                   help="share of the photos held out for validation (whole groups)")
+    if test_fraction is not None:
+        g.add_argument("--test-fraction", "--real-test-fraction", dest="test_fraction", type=float,
+                       default=test_fraction, help="share of the photos held out for testing (whole groups)")
+    g.add_argument("--split-seed", type=int, default=0)
+    g.add_argument("--group-pattern", default=DEFAULT_GROUP_PATTERN, metavar="REGEX",
+                   help="a file's group is the first capture group of REGEX on its stem (default: the stem up to the "
+                        "first '-', DeepCrack's tiles NAME-k); 'none': every file its own group")
+
+
+def grouped_split(args: argparse.Namespace, root: str | Path, stems: list[str] | None = None) -> RealSplit:
+    """The grouped train / validation / test split of a real folder from the split flags."""
+    folder = real_folder(args, root, stems)
+    return split_groups(folder.keys, val_fraction=args.val_fraction, test_fraction=getattr(args, "test_fraction", 0.0),
+                        seed=args.split_seed, group_pattern=args.group_pattern, source=str(Path(root).resolve()))
 
 
 def resolve_valid_channel(args: argparse.Namespace) -> bool:
@@ -113,15 +135,16 @@ def real_folder(args: argparse.Namespace, root: str | Path, stems: list[str] | N
 
 
 def real_split(args: argparse.Namespace, root: str | Path, fraction: float, seed: int,
-               stems: list[str] | None = None) -> tuple[RealFolder, RealFolder | None]:
-    """(train, held-out) views of one real folder (optionally restricted to ``stems``)."""
+               stems: list[str] | None = None) -> tuple[RealFolder, RealFolder | None, RealSplit | None]:
+    """(train, validation, split) views of one real folder (optionally restricted to ``stems``): a grouped
+    split (``--group-pattern``) holding out ``fraction`` of the photos, or the whole folder when it is 0."""
     full = real_folder(args, root, stems)
     if fraction <= 0:
-        return full, None
-    rest, out = split_fraction(full.keys, fraction, seed)
-    if not rest or not out:
-        raise TrainerInputError(f"{root}: split fraction {fraction} leaves an empty side ({len(full)} images)")
-    return real_folder(args, root, rest), real_folder(args, root, out)
+        return full, None, None
+    split = split_groups(full.keys, val_fraction=fraction, test_fraction=0.0, seed=seed,
+                         group_pattern=getattr(args, "group_pattern", DEFAULT_GROUP_PATTERN),
+                         source=str(Path(root).resolve()))
+    return real_folder(args, root, split.train), real_folder(args, root, split.val), split
 
 
 def eval_loader(ds: SegStream, workers: int, device: torch.device) -> DataLoader:

@@ -18,6 +18,7 @@ from trainer.errors import TrainerInputError
 def build_parser() -> argparse.ArgumentParser:
     from trainer.adapt_bn import add_adapt_bn_args
     from trainer.bench import add_bench_args
+    from trainer.benchmark import add_benchmark_args
     from trainer.evaluate import add_eval_args
     from trainer.fuse_images import add_fuse_args as add_fuse_images_args
     from trainer.fusion_apply import add_fuse_args
@@ -26,7 +27,7 @@ def build_parser() -> argparse.ArgumentParser:
     from trainer.predict import add_predict_args
     from trainer.pseudo_label import add_pseudo_label_args
     from trainer.sim2real import add_sim2real_args
-    from trainer.split import add_split_args
+    from trainer.split import add_split_command_args
     from trainer.train import add_seg_args
 
     p = argparse.ArgumentParser(prog="cracktrain", description="Crack segmentation on synthetic shards and real photos.")
@@ -45,7 +46,9 @@ def build_parser() -> argparse.ArgumentParser:
         ("fusion", add_fusion_args, "train the ToF/LiDAR-stereo confidence CNN (thesis: Adadelta 0.01, batch 32, 128 px)"),
         ("fuse", add_fuse_args, "fuse a stereo and a ToF/LiDAR disparity file with a trained confidence CNN"),
         ("fusion-eval", add_fusion_eval_args, "thesis-style table: stereo, ToF/LiDAR, fused max/weighted, + BM3D"),
-        ("split", add_split_args, "deterministic train/test split of a real folder"),
+        ("split", add_split_command_args, "grouped, seeded train / validation / test split of a real folder"),
+        ("benchmark", add_benchmark_args,
+         "score models on DeepCrack's test split and the cross-domain sets at their validation thresholds"),
         ("bench", add_bench_args, "loader samples/s and model step time"),
         ("fuse-images", add_fuse_images_args, "guided-filter fusion of an exposure or focus stack; prints Q_Y, Q_C, Q_G, Q_MI"),
     ):
@@ -130,8 +133,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         elif args.command == "split":
             from trainer.split import run_split
 
-            s = run_split(args)
-            print(f"{len(s['train'])} train / {len(s['test'])} test -> {args.out}")
+            s = run_split(args.source, args.out, val_fraction=args.val_fraction, test_fraction=args.test_fraction,
+                          seed=args.split_seed, group_pattern=args.group_pattern, image_dir=args.image_dir,
+                          mask_dir=args.mask_dir, mask_suffix=args.mask_suffix, extra_dirs=args.extra_dir)
+            print(f"{s.counts()} -> {args.out}/train, val, test and split.json")
+        elif args.command == "benchmark":
+            from trainer.benchmark import run_benchmark
+
+            r = run_benchmark(args)
+            print(Path(r["out"], "benchmark.md").read_text())
+            print(f"scored {r['models']} models ({r['labels']} rows) on {len(r['sets'])} sets in {r['seconds']} s; "
+                  f"wrote {r['out']}/benchmark.csv, .md, .png, .json")
         elif args.command == "fuse-images":
             from trainer.fuse_images import run_fuse
 

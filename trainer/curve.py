@@ -1,15 +1,17 @@
 """The label-efficiency curve: how many real labels does synthetic pretraining save?
 
-For each N in ``--curve`` (e.g. 0,10,30,60,120,240) and each repeat, two arms train
+For each N in ``--curve`` (e.g. 0,10,30,60,120,180) and each repeat, two arms train
 with the same step budget on the same N labelled real photos:
 
 - ``real``: from scratch on the N photos (N = 0 has nothing to learn from: not run);
-- ``finetune``: from the synthetic-pretrained checkpoint, fine-tuned on the N photos
-  (N = 0 is the pretrained model itself, evaluated as it is).
+- ``finetune``: from that repeat's own synthetic-pretrained checkpoint (pretrained with the
+  repeat's seed, so N = 0 has a spread too), fine-tuned on the N photos (N = 0 is the
+  pretrained model itself, evaluated as it is).
 
-Both arms end with precise BN (``trainer.bn_adapt``): at a short budget the BatchNorm running
-statistics still lag the weights, and a real-only model can score F1 0.06 in eval mode that
-scores 0.69 once they are recomputed.
+Both arms are treated alike: the same steps, precise BN at the end (``trainer.bn_adapt``: at
+a short budget the BatchNorm running statistics still lag the weights), and each model's
+threshold chosen on the validation split. Each point records its own steps and its total
+steps including pretraining; the spread over repeats is the sample standard deviation.
 
 Subsets are nested (the 10 are inside the 30, ...): one seeded permutation of the
 training split per repeat, and subset N is its first N names. They never touch the
@@ -21,7 +23,7 @@ from __future__ import annotations
 
 import csv
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Iterable, Sequence
 
@@ -56,7 +58,12 @@ def nested_subsets(train_names: Sequence[str], sizes: Iterable[int], seed: int, 
 
 @dataclass
 class CurvePoint:
-    """One trained-and-evaluated model on the curve."""
+    """One trained-and-evaluated model on the curve.
+
+    ``f1``, ``precision``, ``recall`` and ``iou`` are on the test split at ``threshold`` (chosen on
+    validation); ``cross`` holds F1 on each extra set at the same threshold (CSV columns ``f1:NAME``).
+    ``steps`` are this model's own, ``total_steps`` include its pretraining.
+    """
 
     n: int
     repeat: int
@@ -66,42 +73,64 @@ class CurvePoint:
     recall: float
     iou: float
     threshold: float
+    f1_at_05: float
+    oracle_f1: float
     steps: int
+    total_steps: int
     seconds: float
+    cross: dict[str, float] = field(default_factory=dict)
+
+
+CROSS_PREFIX = "f1:"
 
 
 def write_csv(points: Sequence[CurvePoint], path: Path) -> None:
-    fields = list(CurvePoint.__dataclass_fields__)
+    fields = [k for k in CurvePoint.__dataclass_fields__ if k != "cross"]
+    extra = list(dict.fromkeys(CROSS_PREFIX + name for p in points for name in p.cross))
     with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=fields)
+        w = csv.DictWriter(f, fieldnames=fields + extra)
         w.writeheader()
         for p in points:
-            w.writerow(asdict(p))
+            row = asdict(p)
+            cross = row.pop("cross")
+            w.writerow(row | {CROSS_PREFIX + k: v for k, v in cross.items()})
 
 
 def read_csv(path: Path) -> list[CurvePoint]:
     """Points of an earlier (possibly interrupted) curve in ``path``; [] when there is none."""
     if not path.is_file():
         return []
-    types = {k: f.type for k, f in CurvePoint.__dataclass_fields__.items()}
+    types = {k: f.type for k, f in CurvePoint.__dataclass_fields__.items() if k != "cross"}
     cast = {"int": int, "float": float, "str": str}
     with open(path, newline="") as f:
         try:
-            return [CurvePoint(**{k: cast[str(types[k])](row[k]) for k in types}) for row in csv.DictReader(f)]
+            return [CurvePoint(**{k: cast[str(types[k])](row[k]) for k in types},
+                               cross={k[len(CROSS_PREFIX):]: float(v) for k, v in row.items()
+                                      if k.startswith(CROSS_PREFIX) and v not in ("", None)})
+                    for row in csv.DictReader(f)]
         except (KeyError, ValueError) as exc:
             raise TrainerInputError(f"{path}: not a curve CSV written by cracktrain ({exc}); use a new --out") from None
 
 
-def summarise(points: Sequence[CurvePoint]) -> dict[str, dict[int, dict[str, float]]]:
-    """arm -> N -> {mean, std, min, max, count} of F1 over the repeats."""
+def _stats(v: Sequence[float]) -> dict[str, float]:
+    """Mean, sample standard deviation (ddof 1; 0 for one value, shown as n=1), min, max, count."""
+    return {"mean": float(np.mean(v)), "std": float(np.std(v, ddof=1)) if len(v) > 1 else 0.0,
+            "min": float(np.min(v)), "max": float(np.max(v)), "count": len(v)}
+
+
+def summarise(points: Sequence[CurvePoint], metric: str = "f1") -> dict[str, dict[int, dict[str, float]]]:
+    """arm -> N -> {mean, std (sample), min, max, count} of ``metric`` over the repeats; ``metric`` is a
+    CurvePoint field or ``f1:NAME`` for an extra set."""
     out: dict[str, dict[int, dict[str, float]]] = {}
     for arm in ARMS:
         by_n: dict[int, list[float]] = {}
         for p in points:
-            if p.arm == arm:
-                by_n.setdefault(p.n, []).append(p.f1)
-        out[arm] = {n: {"mean": float(np.mean(v)), "std": float(np.std(v)), "min": float(np.min(v)),
-                        "max": float(np.max(v)), "count": len(v)} for n, v in sorted(by_n.items())}
+            if p.arm != arm:
+                continue
+            v = p.cross.get(metric[len(CROSS_PREFIX):]) if metric.startswith(CROSS_PREFIX) else getattr(p, metric)
+            if v is not None:
+                by_n.setdefault(p.n, []).append(v)
+        out[arm] = {n: _stats(v) for n, v in sorted(by_n.items())}
     return out
 
 
@@ -134,9 +163,10 @@ def headline(summary: dict[str, dict[int, dict[str, float]]], at: int = 30) -> s
             f"real-only needs about {math.ceil(need)} photos to match it{saved}")
 
 
-def table_lines(summary: dict[str, dict[int, dict[str, float]]]) -> list[str]:
+def table_lines(summary: dict[str, dict[int, dict[str, float]]], what: str = "F1") -> list[str]:
     sizes = sorted({n for arm in summary.values() for n in arm})
-    lines = ["| N real photos | real-only F1 (mean ± std) | synthetic -> fine-tune F1 (mean ± std) |", "|---|---|---|"]
+    lines = [f"| N real photos | real-only {what} (mean ± sd) | synthetic -> fine-tune {what} (mean ± sd) |",
+             "|---|---|---|"]
     for n in sizes:
         cells = []
         for arm in ARMS:
@@ -146,8 +176,10 @@ def table_lines(summary: dict[str, dict[int, dict[str, float]]]) -> list[str]:
     return lines
 
 
-def plot_curve(summary: dict[str, dict[int, dict[str, float]]], path: Path, title: str) -> None:
-    """F1 against N per arm: mean line, min..max band over the repeats (matplotlib Agg)."""
+def plot_curve(summary: dict[str, dict[int, dict[str, float]]], path: Path, title: str,
+               cross: dict[str, dict[str, dict[int, dict[str, float]]]] | None = None) -> None:
+    """F1 against N per arm: mean line, min..max band over the repeats (matplotlib Agg); extra sets as thin
+    dashed lines (fine-tune) and dotted lines (real-only) of their means."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -163,11 +195,18 @@ def plot_curve(summary: dict[str, dict[int, dict[str, float]]], path: Path, titl
         lo, hi = np.array([s[k]["min"] for k in n]), np.array([s[k]["max"] for k in n])
         ax.plot(n, mean, marker="o", label=label)
         ax.fill_between(n, lo, hi, alpha=0.2)
+    for i, (name, summ) in enumerate((cross or {}).items()):
+        for arm, style in (("real", ":"), ("finetune", "--")):
+            s = summ.get(arm, {})
+            if s:
+                n = np.array(sorted(s))
+                ax.plot(n, [s[k]["mean"] for k in n], style, color=f"C{i + 2}", lw=1,
+                        label=f"{name} ({'real only' if arm == 'real' else 'fine-tune'})")
     ax.set_xlabel("labelled real photos (N)")
-    ax.set_ylabel("F1 on the real test split")
+    ax.set_ylabel("F1 at the validation threshold")
     ax.set_ylim(0, 1)
     ax.grid(alpha=0.3)
-    ax.legend()
+    ax.legend(fontsize=6 if cross else 8)
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
     fig.savefig(path)

@@ -13,17 +13,14 @@ import json
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 
-from trainer.augment import SampleConfig, sample_to_tensors
+from trainer.augment import SampleConfig
 from trainer.builders import add_data_args, eval_loader, real_folder, shard_source
-from trainer.checkpoint import load_checkpoint
 from trainer.errors import TrainerInputError
 from trainer.metrics import plot_pr_curve
-from trainer.models import SegModel, build_model
+from trainer.scoring import evaluate, load_model
 from trainer.stream import SegStream
-from trainer.train import evaluate
 
 
 def add_eval_args(p: argparse.ArgumentParser) -> None:
@@ -37,31 +34,6 @@ def add_eval_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-progress", action="store_true")
     add_data_args(p)
-
-
-def load_model(path: str | Path, device: torch.device) -> tuple[SegModel, SampleConfig, dict[str, Any]]:
-    """Model + the sample config it was trained with, from a cracktrain checkpoint."""
-    ckpt = load_checkpoint(path)
-    cfg = SampleConfig(**{**ckpt["sample_config"], "crop": None})
-    model = build_model(ckpt["args"]["arch"], cfg.in_channels)
-    try:
-        model.load_state_dict(ckpt["model"])
-    except RuntimeError as exc:
-        raise TrainerInputError(f"checkpoint {path}: weights do not fit {ckpt['args']['arch']} ({str(exc)[:120]})") from None
-    return model.to(device).eval(), cfg, ckpt["args"]
-
-
-def predict_probability(model: torch.nn.Module, cfg: SampleConfig, sample: dict[str, Any],
-                        device: torch.device) -> np.ndarray:
-    """Crack probability of one sample at the native size of its RGB (float32 HxW), as the model's sample
-    config prepares it (resize, depth normalisation)."""
-    t = sample_to_tensors(sample, cfg)
-    with torch.no_grad():
-        logits = model(t["image"][None].to(device))
-    H, W = sample["rgb"].shape[:2]
-    if logits.shape[-2:] != (H, W):
-        logits = torch.nn.functional.interpolate(logits, size=(H, W), mode="bilinear", align_corners=False)
-    return torch.sigmoid(logits)[0, 0].float().cpu().numpy()
 
 
 def _inherit_depth(args: argparse.Namespace, train_args: dict[str, Any], cfg: SampleConfig) -> None:

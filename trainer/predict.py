@@ -36,7 +36,8 @@ from tqdm import tqdm
 
 from trainer.builders import add_data_args, real_folder
 from trainer.errors import TrainerInputError
-from trainer.evaluate import _inherit_depth, load_model, predict_probability
+from trainer.evaluate import _inherit_depth
+from trainer.scoring import load_model, predict_probability
 from trainer.sources import _SHARD_MEMBER
 
 log = logging.getLogger(__name__)

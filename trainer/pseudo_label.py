@@ -32,8 +32,8 @@ import torch
 from tqdm import tqdm
 
 from trainer.errors import TrainerInputError
-from trainer.evaluate import load_model, predict_probability
 from trainer.imageio import read_rgb
+from trainer.scoring import load_model, predict_probability
 from trainer.target_bn import DEFAULT_BATCHES, adapt_bn_to_photos
 
 RECORD = "pseudo_labels.json"

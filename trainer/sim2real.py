@@ -1,7 +1,8 @@
 """``cracktrain sim2real``: does synthetic data help on real cracks, and how many labels does it save?
 
-Rows (same architecture, step budget and seed; each final model scored on the same
-real test set, P/R/F1/IoU at its best-F1 threshold and F1 at 0.5):
+Rows (same architecture, step budget, seed and precise BN; each final model gets its
+threshold on the real validation split and is scored once on the real test split:
+P/R/F1/IoU at that threshold, F1 at 0.5, and the test-label optimum as an oracle):
 
 - ``synthetic``: synthetic shards only;
 - ``synthetic+fourier`` / ``+reinhard`` / ``+histogram`` / ``synthetic+adapt`` (all three
@@ -27,8 +28,15 @@ same ``--curve-steps``; one synthetic pretraining (``--pretrain-steps``, or a ``
 checkpoint) is shared. A second run with the same ``--out`` keeps finished points and resumes
 an interrupted training, so more repeats or sizes extend the curve.
 
-The real test set is a folder (``--real-test``) or a deterministic fraction of ``--real``
-(``--real-test-fraction``, ``--split-seed``). Rows whose inputs are missing are skipped.
+The real data is split by group (``trainer.real_split``: DeepCrack's tiles ``NAME-k`` stay
+together) into train / validation / test (``--val-fraction``, ``--test-fraction``, default
+60 / 20 / 20 of the photos, ``--split-seed``, ``--group-pattern``); with ``--real-test FOLDER``
+the test set is that folder and ``--real`` is split into train / validation. The split is
+written to ``OUT/split.json``. Rows whose inputs are missing are skipped. Cross-domain sets
+are scored on the finished rows by ``cracktrain benchmark OUT``.
+
+``--synthetic`` may also be a folder of images/ + masks/ from another generator (a 2-D one
+such as Syncrack): it trains the ``synthetic`` row only.
 """
 from __future__ import annotations
 
@@ -37,13 +45,21 @@ import json
 import logging
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import torch
 
 from trainer.adapt_bn import adapt_checkpoint
-from trainer.builders import add_data_args, eval_loader, real_folder, sample_config_from_args
+from trainer.builders import (
+    add_data_args,
+    add_split_args,
+    eval_loader,
+    grouped_split,
+    real_folder,
+    sample_config_from_args,
+)
 from trainer.checkpoint import load_checkpoint, steps_seen
 from trainer.curve import (
     CurvePoint,
@@ -57,12 +73,17 @@ from trainer.curve import (
 )
 from trainer.curve import write_csv as write_curve_csv
 from trainer.errors import TrainerInputError
-from trainer.evaluate import load_model
+from trainer.eval_sets import DEFAULT_REAL_ROOT, cross_domain_sets
+from trainer.metrics import ConfusionHistogram
 from trainer.pseudo_label import PseudoSettings, write_pseudo_folder
+from trainer.real_split import RealSplit, split_groups
+from trainer.scoreboard import EvalSet
+from trainer.scoring import evaluate, load_model, report
 from trainer.site_adapt import targets_from_folder, targets_from_paths
-from trainer.sources import RealFolder, split_fraction
+from trainer.sources import RealFolder
 from trainer.stream import SegStream
-from trainer.train import add_seg_args, evaluate, precise_bn_batches
+from trainer.threshold import choose_threshold, store_threshold
+from trainer.train import add_seg_args, precise_bn_batches
 from trainer.train import main as train_seg
 
 log = logging.getLogger(__name__)
@@ -79,10 +100,8 @@ DEFAULT_TARGET_RUNS = (*ADAPT_RUNS, BN_RUN)
 
 def add_sim2real_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--synthetic", default=None, help="synthetic shards (A,B: several datasets together)")
-    p.add_argument("--real", required=True, help="real training folder (or the whole folder with --real-test-fraction)")
-    p.add_argument("--real-test", default=None, help="real test folder")
-    p.add_argument("--real-test-fraction", type=float, default=0.0)
-    p.add_argument("--split-seed", type=int, default=0)
+    p.add_argument("--real", required=True, help="real folder, split by group into train / validation / test (train / validation with --real-test)")
+    p.add_argument("--real-test", default=None, help="real test folder (default: the test side of --real's split)")
     p.add_argument("--arch", default="lraspp_mobilenet_v3_large")
     p.add_argument("--max-steps", type=int, default=300, help="step budget of every row")
     p.add_argument("--batch-size", "-b", type=int, default=4)
@@ -93,6 +112,9 @@ def add_sim2real_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--loss", default="bce")
     p.add_argument("--workers", "-j", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--precise-bn", type=int, default=50, metavar="BATCHES",
+                   help="every row's final model gets its BatchNorm statistics recomputed on this many training "
+                        "batches (0: none); the same for every row and both curve arms")
     p.add_argument("--runs", default=None,
                    help=f"comma list of {', '.join(BASE_RUNS + TARGET_RUNS)} "
                         f"(default: the four base rows, plus {', '.join(DEFAULT_TARGET_RUNS)} with --target)")
@@ -116,12 +138,17 @@ def add_sim2real_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--repeats", type=int, default=3, help="curve: repeats (different nested subsets and seeds)")
     p.add_argument("--curve-steps", type=int, default=None, help="curve: steps per model on N photos (default --max-steps)")
     p.add_argument("--pretrain-steps", type=int, default=None, help="curve: synthetic pretraining steps (default --max-steps)")
-    p.add_argument("--pretrained", default=None, metavar="CKPT",
-                   help="finetune row and curve: start from this synthetic checkpoint instead of pretraining "
-                        "(the finetune row then spends all --max-steps on the real split)")
+    p.add_argument("--pretrained", default=None, metavar="CKPT[,CKPT...]",
+                   help="finetune row: start from this synthetic checkpoint instead of pretraining (the row then "
+                        "spends all --max-steps on the real split); curve: one checkpoint per repeat, comma-separated")
+    p.add_argument("--cross", action="append", default=None, metavar="NAME=FOLDER",
+                   help="curve: extra sets scored at each model's validation threshold (repeatable; default the three "
+                        "cross-domain sets under --real-root; 'none': no extra sets)")
+    p.add_argument("--real-root", default=DEFAULT_REAL_ROOT, help="where --cross looks for relative folders")
     p.add_argument("--out", default="runs/sim2real")
     p.add_argument("--device", default=None)
     p.add_argument("--no-progress", action="store_true")
+    add_split_args(p, val_fraction=0.2, test_fraction=0.2)
     add_data_args(p)
 
 
@@ -137,6 +164,7 @@ def seg_args(args: argparse.Namespace, out: Path, data: str | None, real: str | 
         if hasattr(ns, k) and k not in ("out", "real"):
             setattr(ns, k, v)
     ns.data, ns.real, ns.real_stems, ns.out = data, real, stems, str(out)
+    ns.precise_bn = args.precise_bn  # every row alike (seg's own default skips it without --init)
     ns.val_fraction, ns.val_data, ns.val_real, ns.resume, ns.test_only = 0.0, None, None, None, False
     ns.adapt_target, ns.adapt_targets, ns.init = None, None, None
     ns.bn_target, ns.bn_targets = None, None
@@ -145,15 +173,34 @@ def seg_args(args: argparse.Namespace, out: Path, data: str | None, real: str | 
     return ns
 
 
-def real_split_for(args: argparse.Namespace) -> tuple[list[str] | None, str, list[str] | None]:
-    """(training stems or None for all, test folder, test stems or None)."""
+@dataclass
+class RealSets:
+    """The real data of one comparison: training stems of ``--real``, and the validation and test folders."""
+
+    train_stems: list[str]
+    val: RealFolder
+    test: RealFolder
+    test_root: str
+    split: RealSplit
+
+
+def real_sets_for(args: argparse.Namespace, out: Path) -> RealSets:
+    """Grouped split of ``--real`` (train / val / test, or train / val with ``--real-test``), written to OUT."""
     if args.real_test:
-        return None, args.real_test, None
-    if args.real_test_fraction > 0:
-        keys = real_folder(args, args.real).keys
-        train_stems, test_stems = split_fraction(keys, args.real_test_fraction, args.split_seed)
-        return train_stems, args.real, test_stems
-    raise TrainerInputError("give a real test set: --real-test FOLDER or --real-test-fraction F")
+        split = split_groups(real_folder(args, args.real).keys, val_fraction=args.val_fraction, test_fraction=0.0,
+                             seed=args.split_seed, group_pattern=args.group_pattern,
+                             source=str(Path(args.real).resolve()))
+        test_root, test = args.real_test, real_folder(args, args.real_test)
+    else:
+        if not args.test_fraction > 0:
+            raise TrainerInputError("give a real test set: --real-test FOLDER or --test-fraction F > 0")
+        split = grouped_split(args, args.real)
+        test_root, test = args.real, real_folder(args, args.real, split.test)
+    if not args.val_fraction > 0:
+        raise TrainerInputError("--val-fraction must be > 0: thresholds are chosen on the validation split")
+    out.mkdir(parents=True, exist_ok=True)
+    split.write(out)
+    return RealSets(split.train, real_folder(args, args.real, split.val), test, test_root, split)
 
 
 def adaptation_targets(args: argparse.Namespace, train_stems: list[str] | None) -> tuple[str, ...] | None:
@@ -166,18 +213,32 @@ def adaptation_targets(args: argparse.Namespace, train_stems: list[str] | None) 
     return targets_from_paths([folder.image_path(k) for k in folder.keys])
 
 
-def score(checkpoint: Path, test: RealFolder, args: argparse.Namespace, device: torch.device) -> dict[str, Any]:
+def histogram(checkpoint: Path, folder: RealFolder, args: argparse.Namespace,
+              device: torch.device) -> ConfusionHistogram:
     model, cfg, _ = load_model(checkpoint, device)
-    ds = SegStream(cfg, None, test, train=False, seed=args.seed, skip_bad=args.skip_bad)
-    return evaluate(model, eval_loader(ds, args.workers, device), device, device.type == "cuda").summary(0.5)
+    ds = SegStream(cfg, None, folder, train=False, seed=args.seed, skip_bad=args.skip_bad)
+    return evaluate(model, eval_loader(ds, args.workers, device), device, device.type == "cuda")
 
 
-def train_and_score(ns: argparse.Namespace, test: RealFolder, args: argparse.Namespace,
+def choose_and_score(checkpoint: Path, sets: RealSets, args: argparse.Namespace, device: torch.device,
+                     store: bool = True) -> dict[str, Any]:
+    """Threshold from the validation split (stored in the checkpoint unless ``store`` is off: a checkpoint
+    the user handed in is never rewritten), then one score of the test split."""
+    rec = choose_threshold(histogram(checkpoint, sets.val, args, device),
+                           f"validation split of {args.real} ({len(sets.val)} photos, split seed {args.split_seed})",
+                           len(sets.val))
+    if store:
+        store_threshold(checkpoint, rec)
+    r = report(histogram(checkpoint, sets.test, args, device), rec["threshold"])
+    return {"checkpoint": str(checkpoint), "threshold": rec["threshold"], "val_f1": rec["val_f1"],
+            "test": r["at_threshold"], "at_0.5": r["at_0.5"], "oracle": r["oracle"]}
+
+
+def train_and_score(ns: argparse.Namespace, sets: RealSets, args: argparse.Namespace,
                     device: torch.device) -> dict[str, Any]:
     info = train_seg(ns)
-    s = score(Path(ns.out) / "checkpoint.pt", test, args, device)
-    return {"steps": info["step"], "train_seconds": round(info["seconds"], 1), "best": s["best"],
-            "at_0.5": s["at_threshold"]}
+    return {"steps": info["step"], "train_seconds": round(info["seconds"], 1),
+            **choose_and_score(Path(ns.out) / "checkpoint.pt", sets, args, device)}
 
 
 def _device(args: argparse.Namespace) -> torch.device:
@@ -198,42 +259,55 @@ def wanted_runs(args: argparse.Namespace) -> list[str]:
     return runs
 
 
-def run_row(name: str, args: argparse.Namespace, out: Path, train_stems: list[str] | None,
-            targets: tuple[str, ...] | None, test: RealFolder, device: torch.device) -> dict[str, Any]:
+def synthetic_is_folder(path: str | None) -> bool:
+    """``--synthetic`` names a folder of images/ + masks/ (another generator's output), not shards."""
+    return bool(path) and "," not in str(path) and (Path(path) / "images").is_dir() \
+        and not (Path(path) / "manifest.json").is_file()
+
+
+def run_row(name: str, args: argparse.Namespace, out: Path, sets: RealSets,
+            targets: tuple[str, ...] | None, device: torch.device) -> dict[str, Any]:
     """Train and score one row; a row that needs synthetic shards is skipped without them."""
     if name != "real" and not args.synthetic and not (name == "finetune" and args.pretrained):
         return {"skipped": "no --synthetic shards given"}
-    stems = train_stems
+    stems = sets.train_stems
     if name == "real":
-        return train_and_score(seg_args(args, out / name, None, args.real, stems), test, args, device)
+        return train_and_score(seg_args(args, out / name, None, args.real, stems), sets, args, device)
+    if synthetic_is_folder(args.synthetic):
+        if name != "synthetic":
+            raise TrainerInputError(f"--synthetic {args.synthetic} is an image folder: it trains the 'synthetic' row "
+                                    f"only, not {name!r} (--runs synthetic,real)")
+        ns = seg_args(args, out / name, None, args.synthetic, None, image_dir="images", mask_dir="masks",
+                      mask_suffix="", real_depth_dir=None)
+        return train_and_score(ns, sets, args, device)
     if name == "mixed":
-        return train_and_score(seg_args(args, out / name, args.synthetic, args.real, stems), test, args, device)
+        return train_and_score(seg_args(args, out / name, args.synthetic, args.real, stems), sets, args, device)
     if name in ADAPT_RUNS:
         ns = seg_args(args, out / name, args.synthetic, None, None, adapt_targets=targets,
                       adapt_methods=ADAPT_RUNS[name])
-        return train_and_score(ns, test, args, device)
+        return train_and_score(ns, sets, args, device)
     if name == "synthetic":
-        return train_and_score(seg_args(args, out / name, args.synthetic, None, None), test, args, device)
+        return train_and_score(seg_args(args, out / name, args.synthetic, None, None), sets, args, device)
     if name == BN_RUN:
-        return target_bn_row(args, out, targets, test, device)
+        return target_bn_row(args, out, targets, sets, device)
     if name == PSEUDO_RUN:
-        return pseudo_label_row(args, out, targets, test, device)
+        return pseudo_label_row(args, out, targets, sets, device)
     if args.finetune_lr is not None and not args.finetune_lr > 0:
         raise TrainerInputError(f"--finetune-lr must be > 0, got {args.finetune_lr}")
     if args.pretrained:
-        return finetune_pretrained_row(args, out, name, stems, test, device)
+        return finetune_pretrained_row(args, out, name, stems, sets, device)
     # finetune: pretrain on synthetic (adapted when targets exist), then the rest of the budget on real
     if not 0.0 < args.finetune_fraction < 1.0:
         raise TrainerInputError(f"--finetune-fraction must be in (0, 1), got {args.finetune_fraction}")
     pre_steps = max(1, round(args.max_steps * args.finetune_fraction))
     pre_targets = None if args.plain_pretrain else targets
     pre = seg_args(args, out / "finetune_pretrain", args.synthetic, None, None, max_steps=pre_steps,
-                   adapt_targets=pre_targets)
+                   adapt_targets=pre_targets, precise_bn=0)  # an intermediate model: only the final one gets it
     t0 = time.perf_counter()
     train_seg(pre)
     ft = seg_args(args, out / name, None, args.real, stems, max_steps=args.max_steps - pre_steps,
                   init=str(out / "finetune_pretrain" / "checkpoint.pt"), lr=args.finetune_lr or args.lr)
-    res = train_and_score(ft, test, args, device)
+    res = train_and_score(ft, sets, args, device)
     res["pretrain_steps"] = pre_steps
     res["pretrain_adapted"] = pre_targets is not None
     res["finetune_lr"] = args.finetune_lr or args.lr
@@ -243,17 +317,17 @@ def run_row(name: str, args: argparse.Namespace, out: Path, train_stems: list[st
 
 
 def finetune_pretrained_row(args: argparse.Namespace, out: Path, name: str, stems: list[str] | None,
-                            test: RealFolder, device: torch.device) -> dict[str, Any]:
+                            sets: RealSets, device: torch.device) -> dict[str, Any]:
     """``--pretrained CKPT`` fine-tuned on the real split for all ``--max-steps``."""
     pre_step = steps_seen(load_checkpoint(args.pretrained))  # with its own --init chain
     lr = args.finetune_lr or args.lr
     ft = seg_args(args, out / name, None, args.real, stems, init=str(args.pretrained), lr=lr)
-    res = train_and_score(ft, test, args, device)
+    res = train_and_score(ft, sets, args, device)
     res.update({"pretrained": str(args.pretrained), "pretrain_steps": pre_step, "finetune_lr": lr, "steps": args.max_steps})
     return res
 
 
-def target_bn_row(args: argparse.Namespace, out: Path, targets: tuple[str, ...] | None, test: RealFolder,
+def target_bn_row(args: argparse.Namespace, out: Path, targets: tuple[str, ...] | None, sets: RealSets,
                   device: torch.device) -> dict[str, Any]:
     """The ``synthetic`` row's model (trained here unless that row already finished) with BN statistics
     from the target photos: what target BN alone is worth, on identical weights."""
@@ -265,12 +339,12 @@ def target_bn_row(args: argparse.Namespace, out: Path, targets: tuple[str, ...] 
     record = adapt_checkpoint(out / "synthetic" / "checkpoint.pt", dst, targets, device,
                               target=describe_target(args, targets) or "", batch_size=args.batch_size,
                               crop=args.crop, workers=args.workers, seed=args.seed)
-    s = score(dst, test, args, device)
+    res = choose_and_score(dst, sets, args, device)
     return {"steps": info["step"], "train_seconds": round(info["seconds"] + time.perf_counter() - t0, 1),
-            "best": s["best"], "at_0.5": s["at_threshold"], "target_bn": record}
+            **res, "target_bn": record}
 
 
-def pseudo_label_row(args: argparse.Namespace, out: Path, targets: tuple[str, ...] | None, test: RealFolder,
+def pseudo_label_row(args: argparse.Namespace, out: Path, targets: tuple[str, ...] | None, sets: RealSets,
                      device: torch.device) -> dict[str, Any]:
     """The ``synthetic`` row's model (trained here unless finished), then ``--self-train-steps`` on the renders
     plus the target photos pseudo-labelled by that model (``trainer.pseudo_label``)."""
@@ -291,40 +365,41 @@ def pseudo_label_row(args: argparse.Namespace, out: Path, targets: tuple[str, ..
     ns = seg_args(args, out / PSEUDO_RUN / "student", args.synthetic, str(labels), None, init=str(teacher),
                   max_steps=steps, image_dir="images", mask_dir="masks", mask_suffix="", ignore_dir="ignore",
                   real_depth_dir=None)
-    res = train_and_score(ns, test, args, device)
+    res = train_and_score(ns, sets, args, device)
     res["train_seconds"] = round(info["seconds"] + time.perf_counter() - t0, 1)
     res.update({"steps": info["step"] + steps, "self_train_steps": steps, "pseudo_labels": record})
     return res
 
 
 def run_sim2real(args: argparse.Namespace) -> dict[str, Any]:
-    if args.pretrained and not Path(args.pretrained).is_file():
-        raise TrainerInputError(f"--pretrained {args.pretrained} does not exist")
     if args.curve:
         return run_curve(args)
+    if args.pretrained and not Path(args.pretrained).is_file():
+        raise TrainerInputError(f"--pretrained {args.pretrained} does not exist")
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    train_stems, test_root, test_stems = real_split_for(args)
-    test = real_folder(args, test_root, test_stems)
     runs = wanted_runs(args)
-    targets = adaptation_targets(args, train_stems) if any(r in TARGET_RUNS or r == "finetune" for r in runs) else None
+    sets = real_sets_for(args, out)
+    targets = adaptation_targets(args, sets.train_stems) \
+        if any(r in TARGET_RUNS or r == "finetune" for r in runs) else None
     device = _device(args)
     results: dict[str, Any] = {}
-    n_real = len(train_stems) if train_stems is not None else len(real_folder(args, args.real))
     cfg = sample_config_from_args(args)
     table = {"arch": args.arch, "channels": cfg.channels, "depth": args.depth, "depth_norm": cfg.depth_norm,
              "mask_member": args.mask_member or "mask.png", "max_steps": args.max_steps,
              "batch_size": args.batch_size, "crop": args.crop, "seed": args.seed, "lr": args.lr,
-             "lr_scheduler": args.lr_scheduler, "loss": args.loss, "real_train": args.real,
-             "real_train_images": n_real, "real_test": test_root, "real_test_images": len(test),
-             "synthetic": args.synthetic, "target": describe_target(args, targets), "runs": results}
+             "lr_scheduler": args.lr_scheduler, "loss": args.loss, "precise_bn": args.precise_bn,
+             "real_train": args.real, "real_train_images": len(sets.train_stems), "real_val_images": len(sets.val),
+             "real_test": sets.test_root, "real_test_images": len(sets.test), "split_seed": args.split_seed,
+             "val_fraction": args.val_fraction, "test_fraction": args.test_fraction if not args.real_test else None,
+             "group_pattern": sets.split.group_pattern, "synthetic": args.synthetic,
+             "target": describe_target(args, targets), "runs": results}
     results.update(earlier_rows(out, table, runs))
     for i, name in enumerate(runs, 1):
         log.info("sim2real: row %d/%d '%s'", i, len(runs), name)
-        results[name] = run_row(name, args, out, train_stems, targets, test, device)
+        results[name] = run_row(name, args, out, sets, targets, device)
         # after every row, so an interrupted comparison keeps the rows it finished
         (out / "sim2real.json").write_text(json.dumps(table, indent=2))
-        (out / "sim2real.md").write_text("\n".join(rows_markdown(args, table, test_root, len(test))) + "\n")
+        (out / "sim2real.md").write_text("\n".join(rows_markdown(args, table)) + "\n")
     return table
 
 
@@ -355,23 +430,28 @@ def describe_target(args: argparse.Namespace, targets: tuple[str, ...] | None) -
     return f"{where}: {len(targets)} photos"
 
 
-def rows_markdown(args: argparse.Namespace, table: dict[str, Any], test_root: str, n_test: int) -> list[str]:
+def rows_markdown(args: argparse.Namespace, table: dict[str, Any]) -> list[str]:
     lines = [f"# Sim-to-real: {args.arch}, {args.max_steps} steps, batch {args.batch_size}, crop {args.crop}, "
              f"seed {args.seed}", "",
              f"Input {table['channels']} (depth {table['depth']}, {table['depth_norm']}); synthetic labels "
-             f"`{table['mask_member']}`. Real test: {test_root} ({n_test} images). Metrics summed over the test set; "
-             "P/R/F1/IoU at each run's best-F1 threshold (F1 at 0.5 in the last column)."]
+             f"`{table['mask_member']}`; precise BN {table['precise_bn']} batches on every row. Real data "
+             f"{table['real_train']} split by group (`{table['group_pattern']}`, split seed {table['split_seed']}): "
+             f"{table['real_train_images']} train / {table['real_val_images']} validation photos; test "
+             f"{table['real_test']} ({table['real_test_images']} photos). Each row's threshold is chosen on the "
+             "validation split; P/R/F1/IoU on the test split at that threshold, F1 at 0.5, and the test-label "
+             "optimum (an oracle: it looks at the test labels)."]
     if table["target"]:
         lines.append(f"Adaptation target: {table['target']}.")
-    lines += ["", "| training data | threshold | precision | recall | F1 | IoU | F1 @ 0.5 |",
-              "|---|---|---|---|---|---|---|"]
+    lines += ["", "| training data | threshold (val) | precision | recall | **F1** | IoU | F1 @ 0.5 | oracle F1 |",
+              "|---|---|---|---|---|---|---|---|"]
     for name, r in table["runs"].items():
         if "skipped" in r:
-            lines.append(f"| {name} | skipped: {r['skipped']} | | | | | |")
+            lines.append(f"| {name} | skipped: {r['skipped']} | | | | | | |")
         else:
-            b = r["best"]
-            lines.append(f"| {name} | {b['threshold']:.2f} | {b['precision']:.3f} | {b['recall']:.3f} | "
-                         f"{b['f1']:.3f} | {b['iou']:.3f} | {r['at_0.5']['f1']:.3f} |")
+            t, o = r["test"], r["oracle"]
+            lines.append(f"| {name} | {r['threshold']:.2f} | {t['precision']:.3f} | {t['recall']:.3f} | "
+                         f"**{t['f1']:.3f}** | {t['iou']:.3f} | {r['at_0.5']['f1']:.3f} | "
+                         f"{o['f1']:.3f} @ {o['threshold']:.2f} |")
     return lines
 
 
@@ -379,11 +459,9 @@ def rows_markdown(args: argparse.Namespace, table: dict[str, Any], test_root: st
 
 # What a curve's numbers depend on. A second run with the same --out continues the curve (more repeats or sizes,
 # or after a kill) only when these match what curve_settings.json recorded.
-CURVE_SETTINGS = ("synthetic", "real", "real_test", "real_test_fraction", "split_seed", "seed", "arch", "loss", "lr",
-                  "batch_size", "crop", "curve_steps", "pretrain_steps", "max_steps", "depth", "depth_norm",
-                  "mask_member", "precise_bn", "pretrained", "lr_scheduler")
-# Settings added after curves were first recorded: a record without them was made with these values.
-CURVE_SETTING_DEFAULTS = {"lr_scheduler": "none"}
+CURVE_SETTINGS = ("synthetic", "real", "real_test", "test_fraction", "val_fraction", "group_pattern", "split_seed",
+                  "seed", "arch", "loss", "lr", "batch_size", "crop", "curve_steps", "pretrain_steps", "max_steps",
+                  "depth", "depth_norm", "mask_member", "precise_bn", "pretrained", "lr_scheduler", "cross")
 
 
 def check_curve_settings(args: argparse.Namespace, out: Path, targets: tuple[str, ...] | None) -> None:
@@ -397,7 +475,6 @@ def check_curve_settings(args: argparse.Namespace, out: Path, targets: tuple[str
         path.write_text(json.dumps(now, indent=2))
         return
     before = json.loads(path.read_text())
-    before = CURVE_SETTING_DEFAULTS | before
     changed = [f"{k} {before.get(k)!r} -> {v!r}" for k, v in now.items() if before.get(k) != v]
     if changed:
         raise TrainerInputError(f"{out} holds a curve made with other settings ({'; '.join(changed)}); "
@@ -420,83 +497,110 @@ def train_or_reuse(ns: argparse.Namespace) -> dict[str, Any]:
     return train_seg(ns)
 
 
-def curve_precise_bn(args: argparse.Namespace) -> int:
-    """Both arms end with precise BN (default 50 batches). After 120 steps from ImageNet weights the
-    running statistics still lag the weights: N=120 real-only scored F1 0.06 without it, 0.69 with it."""
-    given = getattr(args, "precise_bn", None)
-    return 50 if given is None else given
-
-
 def small_set_repeat(n: int, args: argparse.Namespace) -> int:
     """Repeat a few photos so every loader slot fills two batches (10 photos, batch 8, 2 workers: x4).
     A fixed step budget sees the same photos either way; only the epoch length changes."""
     return max(1, math.ceil(2 * args.batch_size * max(1, args.workers) / max(1, n)))
 
 
+def curve_pretrained(args: argparse.Namespace, out: Path, targets: tuple[str, ...] | None
+                     ) -> list[tuple[Path, int, float]]:
+    """One synthetic-pretrained model per repeat, (checkpoint, its steps, seconds spent here): given by
+    ``--pretrained A,B,C`` (one per repeat) or pretrained here with the repeat's seed."""
+    if args.pretrained:
+        paths = [Path(p.strip()) for p in args.pretrained.split(",") if p.strip()]
+        if len(paths) != args.repeats:
+            raise TrainerInputError(f"--pretrained gives {len(paths)} checkpoint(s) for {args.repeats} repeats: the "
+                                    "curve needs one pretrained model per repeat (pretrained with different seeds)")
+        for p in paths:
+            if not p.is_file():
+                raise TrainerInputError(f"--pretrained {p} does not exist")
+        return [(p, steps_seen(load_checkpoint(p)), 0.0) for p in paths]
+    found = []
+    for r in range(args.repeats):
+        pre = seg_args(args, out / f"r{r}" / "pretrain", args.synthetic, None, None, seed=args.seed + r,
+                       max_steps=args.pretrain_steps or args.max_steps, adapt_targets=targets)
+        log.info("curve: synthetic pretraining of repeat %d (%d steps, seed %d%s)", r, pre.max_steps, pre.seed,
+                 ", adapted" if targets else "")
+        info = train_or_reuse(pre)
+        found.append((Path(pre.out) / "checkpoint.pt", int(info["step"]), float(info["seconds"])))
+    return found
+
+
+def score_point(ckpt: Path, sets: RealSets, cross: list[EvalSet], args: argparse.Namespace,
+                device: torch.device, store: bool) -> dict[str, Any]:
+    """Validation threshold, test scores at it, and F1 on each extra set at the same threshold."""
+    res = choose_and_score(ckpt, sets, args, device, store)
+    res["cross"] = {c.name: report(histogram(ckpt, c.folder, args, device), res["threshold"])["at_threshold"]["f1"]
+                    for c in cross}
+    return res
+
+
 def run_curve(args: argparse.Namespace) -> dict[str, Any]:
     """Real-only vs synthetic -> fine-tune on nested subsets of N labelled photos (see trainer.curve)."""
     if not args.synthetic and not args.pretrained:
-        raise TrainerInputError("--curve needs --synthetic shards (or a --pretrained checkpoint) for the fine-tune arm")
+        raise TrainerInputError("--curve needs --synthetic shards (or --pretrained checkpoints) for the fine-tune arm")
     if args.repeats < 1:
         raise TrainerInputError(f"--repeats must be >= 1, got {args.repeats}")
     sizes = parse_sizes(args.curve)
     out = Path(args.out) / "curve"
-    out.mkdir(parents=True, exist_ok=True)
-    train_stems, test_root, test_stems = real_split_for(args)
-    if train_stems is None:
-        train_stems = real_folder(args, args.real).keys
-    test = real_folder(args, test_root, test_stems)
-    targets = adaptation_targets(args, train_stems)
+    sets = real_sets_for(args, out)
+    cross = cross_domain_sets(args.cross, args, args.real_root)
+    targets = adaptation_targets(args, sets.train_stems)
     steps = args.curve_steps or args.max_steps
     device = _device(args)
     check_curve_settings(args, out, targets)
     done = {(p.n, p.repeat, p.arm): p for p in read_csv(out / "curve.csv")}
-    if args.pretrained:
-        ckpt = load_checkpoint(args.pretrained)
-        pre_info, pre_ckpt = {"step": ckpt["step"], "seconds": 0.0}, Path(args.pretrained)
-        log.info("curve: fine-tunes start from %s (%d steps)", pre_ckpt, ckpt["step"])
-    else:
-        pre = seg_args(args, out / "pretrain", args.synthetic, None, None,
-                       max_steps=args.pretrain_steps or args.max_steps, adapt_targets=targets)
-        log.info("curve: synthetic pretraining (%d steps%s)", pre.max_steps, ", adapted" if targets else "")
-        pre_info = train_or_reuse(pre)
-        pre_ckpt = out / "pretrain" / "checkpoint.pt"
+    t_start = time.perf_counter()
+    pretrained = curve_pretrained(args, out, targets)
     points: list[CurvePoint] = []
     jobs = [(r, n, arm) for r in range(args.repeats) for n in sizes for arm in ("real", "finetune")
             if not (n == 0 and arm == "real")]
-    t_start = time.perf_counter()
     for k, (r, n, arm) in enumerate(jobs, 1):
-        subset = nested_subsets(train_stems, sizes, args.seed, r)[n]
+        subset = nested_subsets(sets.train_stems, sizes, args.seed, r)[n]
         if (n, r, arm) in done:  # finished and scored by an earlier run of the same curve
             points.append(done[(n, r, arm)])
             log.info("curve %d/%d: repeat %d, N=%d, %s: kept from %s", k, len(jobs), r, n, arm, out / "curve.csv")
             continue
         log.info("curve %d/%d: repeat %d, N=%d, %s", k, len(jobs), r, n, arm)
         t0 = time.perf_counter()
+        pre_ckpt, pre_steps, _ = pretrained[r]
         if n == 0:
-            s, trained = score(pre_ckpt, test, args, device), 0
+            ckpt, trained = pre_ckpt, 0
         else:
             ns = seg_args(args, out / f"r{r}" / f"n{n:04d}_{arm}", None, args.real, subset, max_steps=steps,
                           seed=args.seed + r, init=str(pre_ckpt) if arm == "finetune" else None,
-                          real_repeat=small_set_repeat(n, args), precise_bn=curve_precise_bn(args))
+                          real_repeat=small_set_repeat(n, args))
             train_or_reuse(ns)
-            s, trained = score(Path(ns.out) / "checkpoint.pt", test, args, device), steps
-        b = s["best"]
-        points.append(CurvePoint(n=n, repeat=r, arm=arm, f1=b["f1"], precision=b["precision"], recall=b["recall"],
-                                 iou=b["iou"], threshold=b["threshold"], steps=trained,
-                                 seconds=round(time.perf_counter() - t0, 1)))
+            ckpt, trained = Path(ns.out) / "checkpoint.pt", steps
+        s = score_point(ckpt, sets, cross, args, device, store=not (n == 0 and args.pretrained))
+        t = s["test"]
+        points.append(CurvePoint(n=n, repeat=r, arm=arm, f1=t["f1"], precision=t["precision"], recall=t["recall"],
+                                 iou=t["iou"], threshold=s["threshold"], f1_at_05=s["at_0.5"]["f1"],
+                                 oracle_f1=s["oracle"]["f1"], steps=trained,
+                                 total_steps=trained + (pre_steps if arm == "finetune" else 0),
+                                 seconds=round(time.perf_counter() - t0, 1), cross=s["cross"]))
         write_curve_csv(points, out / "curve.csv")  # after every point: an interrupted curve keeps what it has
     summary = summarise(points)
-    title = (f"{args.arch}, {steps} steps per model, pretrain {pre_info['step']} steps"
-             f"{' (adapted)' if targets else ''}, {args.repeats} repeats")
-    plot_curve(summary, out / "curve.png", title)
+    cross_summary = {c.name: summarise(points, f"f1:{c.name}") for c in cross}
+    pre_desc = (f"pretrain {pretrained[0][1]} steps per repeat ({len(pretrained)} models, seeds "
+                f"{args.seed}..{args.seed + args.repeats - 1}){' (adapted)' if targets else ''}")
+    title = f"{args.arch}, {steps} steps per model, {pre_desc}, {args.repeats} repeats"
+    plot_curve(summary, out / "curve.png", title, cross_summary)
     head = headline(summary, 30)
-    md = [f"# Label-efficiency curve: {title}", "", f"Real test: {test_root} ({len(test)} images).", "",
-          *table_lines(summary), "", f"**{head}**", "",
-          f"Wall time: {time.perf_counter() - t_start + pre_info['seconds']:.0f} s "
-          f"(pretraining {pre_info['seconds']:.0f} s)."]
+    md = [f"# Label-efficiency curve: {title}", "",
+          f"Real data: {args.real} split by group (`{sets.split.group_pattern}`, split seed {args.split_seed}): "
+          f"N drawn from {len(sets.train_stems)} training photos; thresholds chosen on {len(sets.val)} validation "
+          f"photos; test {sets.test_root} ({len(sets.test)} photos). F1 at each model's validation threshold, "
+          "mean ± sample sd over the repeats; total steps per point (with pretraining) in curve.csv.", "",
+          *table_lines(summary), "", f"**{head}**", ""]
+    for name, summ in cross_summary.items():
+        md += [f"Cross-domain set `{name}` (evaluation only), same models and thresholds:", "",
+               *table_lines(summ), ""]
+    md += [f"Wall time: {time.perf_counter() - t_start:.0f} s."]
     (out / "curve.md").write_text("\n".join(md) + "\n")
-    result = {"sizes": sizes, "repeats": args.repeats, "steps": steps, "pretrain_steps": pre_info["step"],
-              "adapted": targets is not None, "headline": head, "summary": summary, "out": str(out)}
+    result = {"sizes": sizes, "repeats": args.repeats, "steps": steps, "pretrain_steps": [p[1] for p in pretrained],
+              "adapted": targets is not None, "headline": head, "summary": summary, "cross": cross_summary,
+              "out": str(out)}
     (out / "curve.json").write_text(json.dumps(result, indent=2))
     return result

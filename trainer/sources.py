@@ -39,6 +39,7 @@ DEPTH_SOURCES = ("tof", "lidar", "gt", "none")
 SPARSE_DEPTHS = ("tof", "lidar")  # shard depth members with holes (-1): the validity channel is on by default
 _SHARD_MEMBER = {"tof": "tof", "lidar": "lidar", "gt": "depth"}
 DEFAULT_MASK_MEMBER = "mask.png"
+MASK_EXTS = (".png", ".bmp", ".jpg", ".tif", ".tiff")
 
 
 def split_fraction(names: Sequence[str], fraction: float, seed: int) -> tuple[list[str], list[str]]:
@@ -126,6 +127,25 @@ class RealFolder:
         """The image file of ``stem`` (for reports that must name the file, not just its stem)."""
         return self._images[stem]
 
+    def check_pairs(self) -> None:
+        """Every image has a mask and every mask an image (by stem), else one line naming both lists.
+
+        A scored set with a stray mask or a missing one would silently score fewer photos.
+        """
+        mask_root = self.root / self.mask_dir
+        masks = {p.stem for p in mask_root.iterdir() if p.suffix.lower() in MASK_EXTS} if mask_root.is_dir() else set()
+        want = {s + self.mask_suffix for s in self._images}
+        if self.stems is not None:  # a split side: only its own masks must exist
+            masks &= want
+        no_mask, no_image = sorted(want - masks), sorted(masks - want)
+        if no_mask or no_image:
+            parts = []
+            if no_mask:
+                parts.append(f"{len(no_mask)} image(s) without a mask ({', '.join(no_mask[:3])})")
+            if no_image:
+                parts.append(f"{len(no_image)} mask(s) without an image ({', '.join(no_image[:3])})")
+            raise TrainerInputError(f"{self.root}: image and mask names do not match: {'; '.join(parts)}")
+
     def _find(self, folder: str, stem: str, exts: Sequence[str]) -> Path:
         for ext in exts:
             for e in (ext, ext.upper()):
@@ -135,7 +155,7 @@ class RealFolder:
         raise TrainerInputError(f"{self.root / folder}: no file for '{stem}' ({', '.join(exts)})")
 
     def mask_path(self, stem: str) -> Path:
-        return self._find(self.mask_dir, stem + self.mask_suffix, (".png", ".bmp", ".jpg", ".tif", ".tiff"))
+        return self._find(self.mask_dir, stem + self.mask_suffix, MASK_EXTS)
 
     def load(self, stem: str) -> dict[str, Any]:
         """Decode one sample; raises TrainerInputError naming the bad file."""

@@ -25,7 +25,7 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import torch
 import torch.distributed as dist
@@ -48,11 +48,13 @@ from trainer.builders import (
 from trainer.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state, steps_seen
 from trainer.errors import TrainerInputError
 from trainer.losses import LOSSES, Loss, make_loss
-from trainer.metrics import ConfusionHistogram
 from trainer.models import ARCHS, build_model
+from trainer.real_split import DEFAULT_GROUP_PATTERN, RealSplit
+from trainer.scoring import evaluate
 from trainer.site_adapt import SiteAdaptation, parse_band, targets_from_folder
 from trainer.stream import SegStream, dist_info, mix_repeat
 from trainer.target_bn import DEFAULT_BATCHES, adapt_bn_to_photos
+from trainer.threshold import THRESHOLD_KEY, threshold_record
 
 log = logging.getLogger(__name__)
 
@@ -73,6 +75,9 @@ def add_seg_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--val-fraction", type=float, default=0.0,
                    help="hold out this fraction of --data/--real for validation")
     p.add_argument("--split-seed", type=int, default=0)
+    p.add_argument("--group-pattern", default=DEFAULT_GROUP_PATTERN, metavar="REGEX",
+                   help="--val-fraction of a real folder keeps groups whole: a file's group is the first capture "
+                        "group of REGEX on its stem (default: up to the first '-'); 'none': every file its own group")
     p.add_argument("--arch", choices=ARCHS, default="deeplabv3_resnet50")
     p.add_argument("--loss", choices=LOSSES, default="bce")
     p.add_argument("--lr", type=float, default=1e-4)
@@ -89,7 +94,9 @@ def add_seg_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default=None, help="cpu or cuda (default: cuda when available)")
     p.add_argument("--no-amp", action="store_true", help="disable mixed precision on CUDA")
     p.add_argument("--sync-bn", action="store_true", help="SyncBatchNorm under DDP")
-    p.add_argument("--val-every", type=int, default=0, help="validate every N steps (0: at each epoch end)")
+    p.add_argument("--val-every", type=int, default=0,
+                   help="validate every N steps (0: at each epoch end; -1: only once, after training); the final "
+                        "weights are always validated last and their best-F1 threshold stored in checkpoint.pt")
     p.add_argument("--log-every", type=int, default=10)
     p.add_argument("--out", default="runs/seg", help="output folder (checkpoints, log.csv, tensorboard)")
     p.add_argument("--resume", default=None, help="checkpoint to continue from")
@@ -123,6 +130,7 @@ class TrainState:
     step: int = 0
     best: dict[str, Any] = field(default_factory=lambda: {"f1": -1.0})
     target_bn: dict[str, Any] | None = None  # set once BN statistics were moved to site photos
+    val_threshold: dict[str, Any] | None = None  # the final weights' threshold, chosen on validation
 
 
 class _Logger:
@@ -217,8 +225,8 @@ def load_resume_checkpoint(args: argparse.Namespace) -> dict[str, Any] | None:
     return ckpt
 
 
-def build_datasets(args: argparse.Namespace) -> tuple[SegStream, SegStream | None]:
-    """(training stream, validation stream or None) from the data flags."""
+def build_datasets(args: argparse.Namespace) -> tuple[SegStream, SegStream | None, RealSplit | None]:
+    """(training stream, validation stream or None, grouped split of --real or None) from the data flags."""
     cfg = sample_config_from_args(args)
     if not args.data and not args.real:
         raise TrainerInputError("give training data: --data SHARDS and/or --real FOLDER")
@@ -228,9 +236,9 @@ def build_datasets(args: argparse.Namespace) -> tuple[SegStream, SegStream | Non
         syn = shard_source(args, args.data, frac, "train" if frac > 0 else "all", args.split_seed)
         if frac > 0:
             val_syn = shard_source(args, args.data, frac, "val", args.split_seed)
-    real = val_real = None
+    real = val_real = split = None
     if args.real:
-        real, val_real = real_split(args, args.real, frac, args.split_seed, getattr(args, "real_stems", None))
+        real, val_real, split = real_split(args, args.real, frac, args.split_seed, getattr(args, "real_stems", None))
     if args.val_data:
         val_syn = shard_source(args, args.val_data)
     if args.val_real:
@@ -239,7 +247,7 @@ def build_datasets(args: argparse.Namespace) -> tuple[SegStream, SegStream | Non
     train_ds = SegStream(cfg, syn, real, real_repeat=repeat, batch_size=args.batch_size, train=True,
                          seed=args.seed, skip_bad=args.skip_bad, adapt=site_adaptation(args) if syn else None)
     eval_cfg = SampleConfig(**{**cfg.__dict__, "crop": None})
-    return train_ds, eval_stream(args, eval_cfg, val_syn, val_real)
+    return train_ds, eval_stream(args, eval_cfg, val_syn, val_real), split
 
 
 def site_adaptation(args: argparse.Namespace) -> SiteAdaptation | None:
@@ -373,40 +381,17 @@ def checkpoint_payload(run: Run, state: TrainState) -> dict[str, Any]:
         "lr_scheduler": run.lr_scheduler.state_dict(), "scaler": run.scaler.state_dict() if run.amp else None,
         "epoch": state.epoch, "batch_in_epoch": state.batch_in_epoch, "step": state.step, "args": vars(run.args),
         "sample_config": run.cfg.__dict__, "rng": rng_state(), "best": state.best, "world_size": run.world,
-    }
+    } | ({THRESHOLD_KEY: state.val_threshold} if state.val_threshold else {})
 
 
 # ------------------------------------------------------------------ steps
-
-@torch.no_grad()
-def evaluate(model: torch.nn.Module, loader: DataLoader, device: torch.device, amp: bool = False,
-             progress: bool = False, on_batch: Callable[[dict, torch.Tensor], None] | None = None
-             ) -> ConfusionHistogram:
-    """Dataset-level histogram of probabilities (summed over DDP ranks)."""
-    model.eval()
-    hist = ConfusionHistogram.empty()
-    for batch in tqdm(loader, desc="eval", disable=not progress, leave=False):
-        x = batch["image"].to(device, non_blocking=True)
-        target = batch.get("mask_full", batch["mask"]).to(device)
-        with torch.autocast(device_type=device.type, dtype=torch.float16, enabled=amp):
-            logits = model(x)
-        if logits.shape[-2:] != target.shape[-2:]:
-            logits = torch.nn.functional.interpolate(logits.float(), size=target.shape[-2:], mode="bilinear",
-                                                     align_corners=False)
-        prob = torch.sigmoid(logits.float())
-        hist.update(prob, target)
-        if on_batch is not None:
-            on_batch(batch, prob)
-    hist.all_reduce()
-    return hist
-
 
 def validate(run: Run, val_ds: SegStream | None, state: TrainState) -> dict[str, Any] | None:
     """Score the model on the validation stream (every rank), log it, and leave the model in train mode."""
     if val_ds is None:
         return None
     hist = evaluate(run.model, eval_loader(val_ds, run.args.workers, run.device), run.device, run.amp, run.progress)
-    summary = hist.summary(0.5)
+    summary = hist.summary(0.5) | {"samples": len(val_ds)}
     for k in ("f1", "iou", "precision", "recall"):
         run.logger.scalar("val", k, summary["best"][k], state.step, state.epoch)
     run.logger.scalar("val", "best_threshold", summary["best"]["threshold"], state.step, state.epoch)
@@ -414,14 +399,25 @@ def validate(run: Run, val_ds: SegStream | None, state: TrainState) -> dict[str,
     return summary
 
 
+def validation_source(args: argparse.Namespace) -> str:
+    """What the validation stream holds, for the threshold record."""
+    parts = [f"--val-real {args.val_real}"] if args.val_real else []
+    parts += [f"--val-data {args.val_data}"] if args.val_data else []
+    if args.val_fraction > 0:
+        parts.append(f"--val-fraction {args.val_fraction:g} of the training data (split seed {args.split_seed})")
+    return ", ".join(parts)
+
+
 def record_validation(run: Run, state: TrainState, summary: dict[str, Any] | None) -> None:
-    """On rank 0: keep ``best.pt`` for the best F1 so far and write ``metrics_val.json``."""
+    """On rank 0: keep ``best.pt`` for the best F1 so far (with its validation threshold) and write
+    ``metrics_val.json``."""
     if summary is None or not run.main_proc:
         return
     b = summary["best"]
     if b["f1"] > state.best.get("f1", -1.0):
         state.best = {**b, "step": state.step, "epoch": state.epoch}
-        save_checkpoint(run.out / "best.pt", checkpoint_payload(run, state))
+        record = threshold_record(b, validation_source(run.args), summary["samples"])
+        save_checkpoint(run.out / "best.pt", checkpoint_payload(run, state) | {THRESHOLD_KEY: record})
     latest = {k: v for k, v in summary.items() if k != "pr_curve"}
     (run.out / "metrics_val.json").write_text(json.dumps(
         {"step": state.step, "epoch": state.epoch, "latest": latest, "best": state.best}, indent=2))
@@ -470,7 +466,7 @@ def train_one_epoch(run: Run, train_ds: SegStream, val_ds: SegStream | None, sta
             run.logger.scalar("train", "lr", run.optimizer.param_groups[0]["lr"], state.step, state.epoch)
         bar.update(1)
         bar.set_postfix(loss=f"{lv:.4f}", epoch=state.epoch)
-        if args.val_every and state.step % args.val_every == 0:
+        if args.val_every > 0 and state.step % args.val_every == 0:
             record_validation(run, state, validate(run, val_ds, state))
         if state.step >= run.total_steps or state.batch_in_epoch >= run.steps_per_epoch:
             break
@@ -499,18 +495,20 @@ def fit(run: Run, train_ds: SegStream, val_ds: SegStream | None, state: TrainSta
         train_one_epoch(run, train_ds, val_ds, state, loader_gen, bar)
         if state.batch_in_epoch >= run.steps_per_epoch:
             state.epoch, state.batch_in_epoch = state.epoch + 1, 0
-            if not run.args.val_every:
+            if run.args.val_every == 0:
                 record_validation(run, state, validate(run, val_ds, state))
         if run.main_proc:
             save_checkpoint(run.out / "checkpoint.pt", checkpoint_payload(run, state))
     bar.close()
     finish_precise_bn(run, train_ds, state)
     finish_target_bn(run, state)
+    if val_ds is not None:  # the final weights, as saved: their threshold is the one they are used at
+        summary = validate(run, val_ds, state)
+        record_validation(run, state, summary)
+        state.val_threshold = threshold_record(summary["best"], validation_source(run.args), summary["samples"])
     if run.main_proc:
         final = {"finished": True} | ({"target_bn": state.target_bn} if state.target_bn else {})
         save_checkpoint(run.out / "checkpoint.pt", checkpoint_payload(run, state) | final)
-        if val_ds is not None and state.best.get("f1", -1) < 0:
-            record_validation(run, state, validate(run, val_ds, state))
 
 
 def main(args: argparse.Namespace) -> dict[str, Any]:
@@ -527,7 +525,9 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
         args.crop = None
     args.mask_member = mask_member(args)  # stored resolved in the checkpoint
     ckpt = load_resume_checkpoint(args)
-    train_ds, val_ds = build_datasets(args)
+    train_ds, val_ds, split = build_datasets(args)
+    if split is not None and main_proc:
+        split.write(out)
     if bn_target_photos(args) and train_ds.cfg.channels != "rgb":  # checked before any step is trained
         raise TrainerInputError(f"--bn-target needs an RGB model (--depth none); photos have no {args.depth} depth")
     model, bare = build_network(args, train_ds.cfg.in_channels, device, distributed)

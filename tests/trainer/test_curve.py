@@ -24,7 +24,9 @@ def test_subsets_nested_seeded_and_disjoint_from_test():
 
 
 def _pt(n, arm, f1, r=0):
-    return CurvePoint(n=n, repeat=r, arm=arm, f1=f1, precision=0, recall=0, iou=0, threshold=0.5, steps=1, seconds=1)
+    return CurvePoint(n=n, repeat=r, arm=arm, f1=f1, precision=0, recall=0, iou=0, threshold=0.5, f1_at_05=f1 / 2,
+                      oracle_f1=f1 + 0.01, steps=1, total_steps=1 + 600 * (arm == "finetune"), seconds=1,
+                      cross={"walls": f1 / 3} if r % 2 else {})
 
 
 def test_labels_to_match_and_headline():
@@ -32,6 +34,9 @@ def test_labels_to_match_and_headline():
            _pt(30, "finetune", 0.58, 0), _pt(30, "finetune", 0.62, 1)]
     s = summarise(pts)
     assert s["finetune"][30]["mean"] == pytest.approx(0.60)
+    assert s["finetune"][30]["std"] == pytest.approx(0.0282842712, rel=1e-6)  # sample sd: sqrt(0.02**2 * 2 / 1)
+    assert summarise(pts, "f1:walls")["finetune"][30] == pytest.approx(
+        {"mean": 0.62 / 3, "std": 0.0, "min": 0.62 / 3, "max": 0.62 / 3, "count": 1})  # one repeat has the set
     # 0.60 lies halfway between N=30 (0.50) and N=60 (0.70): 45 photos
     assert labels_to_match(s["real"], 0.60) == pytest.approx(45.0)
     assert "about 45 photos" in headline(s, 30) and "1.5x" in headline(s, 30)

@@ -151,11 +151,13 @@ def test_cli_pseudo_label_then_train_on_it(teacher, tmp_path, capsys):
 def test_sim2real_pseudo_row_starts_from_the_synthetic_model(teacher, tmp_path):
     shards = write_shards(tmp_path / "shards", per_shard=4)
     out = tmp_path / "s2r"
-    assert main(["sim2real", "--synthetic", str(shards), "--real", str(teacher["real"]), "--real-test-fraction",
+    assert main(["sim2real", "--synthetic", str(shards), "--real", str(teacher["real"]), "--test-fraction",
                  "0.25", "--target", "--max-steps", "2", "--self-train-steps", "3", "--runs", "synthetic+pseudo",
                  "--arch", "unet", "-b", "2", "--crop", "32", "-j", "0", "--no-progress", "--out", str(out)]) == 0
-    row = json.loads((out / "sim2real.json").read_text())["runs"]["synthetic+pseudo"]
-    assert row["pseudo_labels"]["photos"] == 6  # the 6 training photos, never the 2 test ones
+    table = json.loads((out / "sim2real.json").read_text())
+    row = table["runs"]["synthetic+pseudo"]
+    # the training photos only, never the validation or test ones
+    assert row["pseudo_labels"]["photos"] == table["real_train_images"] == 4
     assert row["self_train_steps"] == 3 and row["steps"] == 5
     assert load_checkpoint(out / "synthetic+pseudo" / "student" / "checkpoint.pt")["step"] == 3
     assert (out / "synthetic" / "checkpoint.pt").is_file()

@@ -15,7 +15,7 @@ from trainer.augment import SampleConfig, sample_to_tensors
 from trainer.cli import main
 from trainer.depth import normalise_depth
 from trainer.errors import TrainerInputError
-from trainer.evaluate import load_model
+from trainer.scoring import load_model
 from trainer.sources import ShardSource
 
 

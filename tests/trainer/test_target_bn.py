@@ -14,8 +14,8 @@ from trainer.augment import SampleConfig
 from trainer.checkpoint import load_checkpoint
 from trainer.cli import main
 from trainer.errors import TrainerInputError
-from trainer.evaluate import load_model
 from trainer.models import build_model
+from trainer.scoring import load_model
 from trainer.target_bn import PhotoCrops, adapt_bn_to_photos, photo_crop_config
 
 CPU = torch.device("cpu")
@@ -141,11 +141,12 @@ def test_seg_bn_target_is_checked_before_training(trained, tmp_path, capsys):
 def test_sim2real_bn_row_reuses_the_synthetic_weights(trained, tmp_path):
     shards = write_shards(tmp_path / "shards", per_shard=4)
     out = tmp_path / "s2r"
-    assert main(["sim2real", "--synthetic", str(shards), "--real", str(trained["real"]), "--real-test-fraction",
+    assert main(["sim2real", "--synthetic", str(shards), "--real", str(trained["real"]), "--test-fraction",
                  "0.25", "--target", "--max-steps", "2", "--runs", "synthetic,synthetic+bn", "--arch", "unet",
                  "-b", "2", "--crop", "32", "-j", "0", "--no-progress", "--out", str(out)]) == 0
     table = json.loads((out / "sim2real.json").read_text())
-    assert table["runs"]["synthetic+bn"]["target_bn"]["photos"] == 6  # the 6 training photos, not the 2 test ones
+    # the training photos only, never the validation or test ones
+    assert table["runs"]["synthetic+bn"]["target_bn"]["photos"] == table["real_train_images"] == 4
     syn = load_checkpoint(out / "synthetic" / "checkpoint.pt")["model"]
     bn = load_checkpoint(out / "synthetic+bn" / "checkpoint.pt")["model"]
     assert all(torch.equal(syn[k], bn[k]) for k in syn if "running" not in k and "num_batches" not in k)

@@ -36,7 +36,6 @@ def test_deepcrack_folder_shapes_and_binary_masks():
 def test_split_folder_keeps_the_stem_order_of_the_same_stems_in_the_whole_folder(tmp_path):
     """'a.png' sorts after 'a-1.png' by file name but before it by stem: both ways of naming a
     training split must list (and so draw) its samples in one order."""
-    import argparse
 
     from trainer.split import run_split
 
@@ -47,11 +46,10 @@ def test_split_folder_keeps_the_stem_order_of_the_same_stems_in_the_whole_folder
     for stem in ("a", "a-1", "a-2", "b", "b-1", "c"):
         cv2.imwrite(str(src / "images" / f"{stem}.png"), img)
         cv2.imwrite(str(src / "masks" / f"{stem}.png"), m)
-    ns = argparse.Namespace(source=str(src), out=str(tmp_path / "split"), test_fraction=0.34, seed=0,
-                            image_dir="images", mask_dir="masks", mask_suffix="", extra_dir=[])
-    split = run_split(ns)
-    whole = RealFolder(src, stems=split["train"]).keys
-    assert RealFolder(tmp_path / "split" / "train").keys == whole == sorted(split["train"])
+    split = run_split(str(src), str(tmp_path / "split"), val_fraction=0.0, test_fraction=0.34, seed=0,
+                      group_pattern="none")
+    whole = RealFolder(src, stems=split.train).keys
+    assert RealFolder(tmp_path / "split" / "train").keys == whole == sorted(split.train)
     assert RealFolder(src).keys == ["a", "a-1", "a-2", "b", "b-1", "c"]
 
 

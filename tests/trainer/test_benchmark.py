@@ -1,0 +1,139 @@
+"""cracktrain benchmark: the table on hand-made models and folders, thresholds from validation, refusals."""
+import argparse
+import csv
+import math
+
+import cv2
+import numpy as np
+import pytest
+from real_folders import train_tiny_model, write_real_folder
+
+from trainer.cli import main
+from trainer.errors import TrainerInputError
+from trainer.eval_sets import parse_set
+from trainer.metrics import ConfusionHistogram
+from trainer.scoreboard import EvalSet, ModelEntry, markdown_lines, score_all, summarise, write_csv
+from trainer.sources import RealFolder
+
+# One 2x4 photo: grey 0 (dark) or 200; the crack label marks two dark pixels and one bright one.
+GREY = np.array([[0, 0, 200, 200], [0, 200, 200, 200]], np.uint8)
+LABEL = np.array([[1, 1, 0, 0], [0, 0, 0, 1]], np.uint8) * 255
+
+
+def write_folder(root, images, masks=None):
+    (root / "images").mkdir(parents=True)
+    (root / "masks").mkdir()
+    for name, grey in images.items():
+        cv2.imwrite(str(root / "images" / f"{name}.png"), np.repeat(grey[..., None], 3, 2))
+    for name, m in (masks or {}).items():
+        cv2.imwrite(str(root / "masks" / f"{name}.png"), m)
+    return root
+
+
+class Grey:
+    """A hand-made model: crack probability = 1 - grey/255 ('dark') or grey/255 ('bright')."""
+
+    def __init__(self, bright: bool) -> None:
+        self.bright = bright
+
+    def histogram(self, folder: RealFolder) -> ConfusionHistogram:
+        hist = ConfusionHistogram.empty()
+        import torch
+
+        for k in folder.keys:
+            s = folder.load(k)
+            p = s["rgb"][..., 0].astype(np.float32) / 255.0
+            hist.update(torch.from_numpy(p if self.bright else 1.0 - p), torch.from_numpy(s["mask"] > 127))
+        return hist
+
+
+def test_table_matches_the_hand_computed_one(tmp_path):
+    one = write_folder(tmp_path / "one", {"x": GREY}, {"x": LABEL})
+    # the second set is the first photo twice, one of them with every label flipped
+    two = write_folder(tmp_path / "two", {"x": GREY, "y": GREY}, {"x": LABEL, "y": 255 - LABEL})
+    sets = [EvalSet("one", RealFolder(one), "one photo"), EvalSet("two", RealFolder(two), "two photos")]
+    entries = [ModelEntry("dark", "dark_s0", 0.5, "hand", Grey(False)),
+               ModelEntry("dark", "dark_s1", 0.1, "hand", Grey(False)),
+               ModelEntry("bright", "bright", 0.3, "hand", Grey(True))]
+    rows = {(r.model, r.set): r for r in score_all(entries, sets)}
+
+    # dark at 0.5 on 'one': predicts the 3 dark pixels; TP 2, FP 1, FN 1
+    r = rows["dark_s0", "one"]
+    assert (r.precision, r.recall, r.f1, r.iou) == pytest.approx((2 / 3, 2 / 3, 2 / 3, 0.5))
+    assert r.f1_at_0_5 == pytest.approx(2 / 3)
+    # oracle: every threshold above the bright pixels' 1 - 200/255 = 0.216 gives 2/3; the lowest is 0.22
+    assert r.oracle_f1 == pytest.approx(2 / 3) and r.oracle_threshold == pytest.approx(0.22)
+    # dark at 0.1: everything is crack; TP 3, FP 5, FN 0
+    r = rows["dark_s1", "one"]
+    assert (r.precision, r.recall, r.f1, r.iou) == pytest.approx((3 / 8, 1.0, 6 / 11, 3 / 8))
+    # bright at 0.3 predicts the 5 bright pixels: TP 1, FP 4, FN 2
+    r = rows["bright", "one"]
+    assert (r.precision, r.recall, r.f1, r.iou) == pytest.approx((1 / 5, 1 / 3, 1 / 4, 1 / 7))
+    # on 'two' the flipped copy adds TP 1, FP 2, FN 4 at 0.5 (its crack = the 5 bright and the 3rd dark pixel)
+    r = rows["dark_s0", "two"]
+    assert (r.precision, r.recall) == pytest.approx((3 / 6, 3 / 8))
+    assert r.f1 == pytest.approx(6 / (6 + 3 + 5))
+
+    summ = summarise(list(rows.values()))
+    mean, sd, n = summ["dark"]["one"]["f1"]
+    assert n == 2 and mean == pytest.approx((2 / 3 + 6 / 11) / 2)
+    assert sd == pytest.approx(abs(2 / 3 - 6 / 11) / math.sqrt(2))  # sample sd (ddof 1) of two values
+    assert math.isnan(summ["bright"]["one"]["f1"][1])  # one model: no spread is claimed
+    md = "\n".join(markdown_lines(list(rows.values()), sets))
+    assert f"| dark | 2 | {mean:.3f} ± {sd:.3f} |" in md and "| bright | 1 | 0.250 |" in md
+    write_csv(list(rows.values()), tmp_path / "b.csv")
+    assert len(list(csv.DictReader(open(tmp_path / "b.csv")))) == 6
+
+
+def _set_args(**kw):
+    return argparse.Namespace(image_dir="images", mask_dir="masks", mask_suffix="", val_fraction=0.2,
+                              test_fraction=0.2, split_seed=0, group_pattern=r"^([^-]+)-", **kw)
+
+
+def test_a_folder_with_mismatched_names_is_refused_in_one_line(tmp_path, capsys):
+    bad = write_folder(tmp_path / "bad", {"a": GREY, "b": GREY}, {"a": LABEL, "c": LABEL})
+    with pytest.raises(TrainerInputError, match=r"1 image\(s\) without a mask \(b\); 1 mask\(s\) without an image \(c\)"):
+        parse_set(f"bad={bad}", _set_args())
+    good = write_folder(tmp_path / "good", {"a": GREY}, {"a": LABEL})
+    assert main(["benchmark", str(tmp_path / "nope.pt"), "--set", f"bad={bad}", "--set", f"good={good}",
+                 "--out", str(tmp_path / "o"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bad" in err[0] and "without a mask" in err[0]
+    assert not (tmp_path / "o").exists()  # refused before anything was written
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    return train_tiny_model(tmp_path_factory.mktemp("bench"))
+
+
+def test_benchmark_cli_scores_checkpoints_at_their_validation_threshold(tiny, tmp_path):
+    other = write_real_folder(tmp_path / "other", n=4)
+    val = write_real_folder(tmp_path / "val", n=3)
+    out = tmp_path / "b"
+    assert main(["benchmark", f"tiny={tiny['ckpt']}", f"tiny={tiny['ckpt']}", "--set", f"other={other}",
+                 "--val", f"v={val}", "--out", str(out), "-j", "0", "--no-progress"]) == 0
+    rows = list(csv.DictReader(open(out / "benchmark.csv")))
+    assert len(rows) == 2 and {r["set"] for r in rows} == {"other"}
+    assert rows[0]["threshold_source"] == "benchmark --val v"  # the tiny model stored none: chosen on --val
+    assert (out / "benchmark.png").stat().st_size > 0 and "| tiny | 2 |" in (out / "benchmark.md").read_text()
+    # flipping every label of the scored set leaves the threshold as it was: it never looks at them
+    flipped = tmp_path / "flipped"
+    write_real_folder(flipped, n=4)
+    for m in (flipped / "masks").iterdir():
+        cv2.imwrite(str(m), 255 - cv2.imread(str(m), cv2.IMREAD_GRAYSCALE))
+    assert main(["benchmark", f"tiny={tiny['ckpt']}", "--set", f"other={flipped}", "--val", f"v={val}",
+                 "--out", str(tmp_path / "f"), "-j", "0", "--no-progress"]) == 0
+    again = list(csv.DictReader(open(tmp_path / "f" / "benchmark.csv")))
+    assert again[0]["threshold"] == rows[0]["threshold"] and again[0]["f1"] != rows[0]["f1"]
+
+
+def test_a_model_is_refused_on_photos_of_groups_it_trained_on(tiny, tmp_path, capsys):
+    # the tiny model trained on every photo of tiny['real']; a set that is a symlinked part of it is refused
+    part = tmp_path / "part"
+    for sub in ("images", "masks"):
+        (part / sub).mkdir(parents=True)
+        (part / sub / "003.png").symlink_to(tiny["real"] / sub / "003.png")
+    assert main(["benchmark", str(tiny["ckpt"]), "--set", f"part={part}", "--val", "none",
+                 "--out", str(tmp_path / "o"), "--no-progress"]) == 2
+    assert "trained on photos of 1 group(s) of set part (003)" in capsys.readouterr().err
