@@ -75,8 +75,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             s = run_evaluate(args)
             a, b = s["at_threshold"], s["best"]
-            print(f"@{a['threshold']:.2f}: acc {a['accuracy']:.4f} P {a['precision']:.4f} R {a['recall']:.4f} F1 {a['f1']:.4f} IoU {a['iou']:.4f}")
-            print(f"best @{b['threshold']:.2f}: acc {b['accuracy']:.4f} P {b['precision']:.4f} R {b['recall']:.4f} F1 {b['f1']:.4f} IoU {b['iou']:.4f}")
+            print(f"@{a['threshold']:.2f} ({s['threshold_source']}): acc {a['accuracy']:.4f} P {a['precision']:.4f} "
+                  f"R {a['recall']:.4f} F1 {a['f1']:.4f} IoU {a['iou']:.4f}")
+            print(f"oracle, best on these labels @{b['threshold']:.2f}: acc {b['accuracy']:.4f} P {b['precision']:.4f} R {b['recall']:.4f} F1 {b['f1']:.4f} IoU {b['iou']:.4f}")
             print(f"wrote {s['out']}/metrics.json and pr_curve.png")
         elif args.command == "predict":
             from trainer.predict import run_predict

@@ -1,8 +1,9 @@
 """``cracktrain evaluate``: thesis 5.4.1 metrics of a checkpoint on a dataset.
 
 Confusion counts are summed over the whole set (not averaged per image);
-reports accuracy/P/R/F1/IoU at ``--threshold`` and at the best-F1 threshold of
-the 0.00..1.00 sweep, and writes ``metrics.json`` + ``pr_curve.png``.
+reports accuracy/P/R/F1/IoU at the model's operating threshold (``--threshold``, else the
+one chosen on validation and stored in the checkpoint, else 0.5) and at the best-F1
+threshold of the 0.00..1.00 sweep (an oracle: it is chosen on the labels being scored), and writes ``metrics.json`` + ``pr_curve.png``.
 Depth handling (channels, near/far, normalisation, resize) comes from the
 checkpoint, so evaluation always matches training.
 """
@@ -17,17 +18,21 @@ import torch
 
 from trainer.augment import SampleConfig
 from trainer.builders import add_data_args, eval_loader, real_folder, shard_source
+from trainer.checkpoint import load_checkpoint
 from trainer.errors import TrainerInputError
 from trainer.metrics import plot_pr_curve
 from trainer.scoring import evaluate, load_model
 from trainer.stream import SegStream
+from trainer.threshold import operating_threshold
 
 
 def add_eval_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--checkpoint", "-c", required=True)
     p.add_argument("--data", default=None, help="synthetic shards to evaluate on")
     p.add_argument("--real", default=None, help="real image/mask folder to evaluate on")
-    p.add_argument("--threshold", type=float, default=0.5)
+    p.add_argument("--threshold", type=float, default=None,
+                   help="operating threshold (default: the one chosen on validation and stored in the checkpoint, "
+                        "else 0.5)")
     p.add_argument("--out", default=None, help="output folder (default: next to the checkpoint)")
     p.add_argument("--workers", "-j", type=int, default=2)
     p.add_argument("--device", default=None)
@@ -60,7 +65,8 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     ds = SegStream(cfg, shards, real, train=False, seed=args.seed, skip_bad=args.skip_bad)
     amp = device.type == "cuda"
     hist = evaluate(model, eval_loader(ds, args.workers, device), device, amp, progress=not args.no_progress)
-    summary = hist.summary(args.threshold)
+    threshold, source = operating_threshold(load_checkpoint(args.checkpoint), args.threshold)
+    summary = hist.summary(threshold) | {"threshold_source": source}
     out = Path(args.out) if args.out else Path(args.checkpoint).parent / "eval"
     out.mkdir(parents=True, exist_ok=True)
     summary["checkpoint"] = str(args.checkpoint)

@@ -35,10 +35,12 @@ import torch
 from tqdm import tqdm
 
 from trainer.builders import add_data_args, real_folder
+from trainer.checkpoint import load_checkpoint
 from trainer.errors import TrainerInputError
 from trainer.evaluate import _inherit_depth
 from trainer.scoring import load_model, predict_probability
 from trainer.sources import _SHARD_MEMBER
+from trainer.threshold import operating_threshold
 
 log = logging.getLogger(__name__)
 REPORT_NAME = "report.json"
@@ -48,7 +50,9 @@ def add_predict_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", help="folder with images/ (+ depth subfolder) or a folder of images")
     p.add_argument("--checkpoint", "-c", required=True)
     p.add_argument("--out", required=True)
-    p.add_argument("--threshold", type=float, default=0.5)
+    p.add_argument("--threshold", type=float, default=None,
+                   help="crack where probability >= this (default: the threshold chosen on validation and stored in "
+                        "the checkpoint, else 0.5)")
     p.add_argument("--pixel-size-m", type=float, default=None,
                    help="metres per pixel, for lengths in metres on a flat, fronto-parallel photo")
     p.add_argument("--intrinsics", default=None, metavar="K.json",
@@ -151,6 +155,8 @@ def run_predict(args: argparse.Namespace) -> PredictResult:
     device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
     model, cfg, train_args = load_model(args.checkpoint, device)
     _inherit_depth(args, train_args, cfg)
+    threshold, source = operating_threshold(load_checkpoint(args.checkpoint), args.threshold)
+    log.info("threshold %.2f: %s", threshold, source)
     root = Path(args.input)
     if not root.is_dir():
         raise TrainerInputError(f"input folder {root} does not exist")
@@ -187,12 +193,12 @@ def run_predict(args: argparse.Namespace) -> PredictResult:
             continue
         key = sample["key"]
         prob = predict_probability(model, cfg, sample, device)
-        mask = (prob >= args.threshold).astype(np.uint8) * 255
+        mask = (prob >= threshold).astype(np.uint8) * 255
         cv2.imwrite(str(out / f"{key}_prob.png"), np.round(prob * 255).astype(np.uint8))
         cv2.imwrite(str(out / f"{key}_mask.png"), mask)
         cv2.imwrite(str(out / f"{key}_overlay.png"), cv2.cvtColor(overlay(sample["rgb"], mask), cv2.COLOR_RGB2BGR))
         meas, unit = _measure(mask > 0, sample, K, args)
-        rep = {"image": sample["path"], "threshold": args.threshold, "crack_pixels": int((mask > 0).sum()),
+        rep = {"image": sample["path"], "threshold": threshold, "threshold_source": source, "crack_pixels": int((mask > 0).sum()),
                "crack_fraction": float((mask > 0).mean()), "crack_length": float(meas.longest_path),
                "length_unit": unit, "length_definition": "longest in-mask path, tip to tip (thesis 5.1.4)",
                "measurement": {k: v for k, v in meas.to_dict().items() if k != "components"},

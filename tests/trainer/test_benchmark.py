@@ -137,3 +137,39 @@ def test_a_model_is_refused_on_photos_of_groups_it_trained_on(tiny, tmp_path, ca
     assert main(["benchmark", str(tiny["ckpt"]), "--set", f"part={part}", "--val", "none",
                  "--out", str(tmp_path / "o"), "--no-progress"]) == 2
     assert "trained on photos of 1 group(s) of set part (003)" in capsys.readouterr().err
+
+
+def test_seg_stores_the_validation_threshold_and_predict_uses_it(tmp_path):
+    import json
+
+    from trainer.checkpoint import load_checkpoint
+
+    real, val = write_real_folder(tmp_path / "r", n=8), write_real_folder(tmp_path / "v", n=3)
+    run = tmp_path / "run"
+    assert main(["seg", "--real", str(real), "--val-real", str(val), "--val-every", "-1", "--max-steps", "2",
+                 "--arch", "unet", "-b", "2", "--crop", "32", "-j", "0", "--no-progress", "--out", str(run)]) == 0
+    rec = load_checkpoint(run / "checkpoint.pt")["val_threshold"]
+    assert rec["chosen_on"] == f"--val-real {val}" and rec["photos"] == 3 and 0.0 <= rec["threshold"] <= 1.0
+    assert load_checkpoint(run / "best.pt")["val_threshold"]["threshold"] == rec["threshold"]
+    val_rows = [r for r in csv.DictReader(open(run / "log.csv")) if r["kind"] == "val" and r["name"] == "f1"]
+    assert len(val_rows) == 1  # --val-every -1: validated once, after training
+    assert main(["predict", str(real), "-c", str(run / "checkpoint.pt"), "--out", str(tmp_path / "p"),
+                 "--no-progress"]) == 0
+    rep = json.loads((tmp_path / "p" / "000.json").read_text())
+    assert rep["threshold"] == rec["threshold"] and rep["threshold_source"].startswith("validation")
+
+
+def test_seg_val_fraction_on_real_data_keeps_groups_whole(tmp_path):
+    from trainer.real_split import read_split
+
+    root = tmp_path / "tiles"
+    write_real_folder(root, n=12)
+    for i, p in enumerate(sorted((root / "images").iterdir())):  # 4 photos cut into 3 tiles each: NAME-k
+        for sub in ("images", "masks"):
+            (root / sub / p.name).rename(root / sub / f"photo{i // 3}-{i % 3}.png")
+    run = tmp_path / "run"
+    assert main(["seg", "--real", str(root), "--val-fraction", "0.25", "--val-every", "-1", "--max-steps", "1",
+                 "--arch", "unet", "-b", "2", "--crop", "32", "-j", "0", "--no-progress", "--out", str(run)]) == 0
+    split = read_split(run)
+    assert len(split.val) == 3 and len({s.split("-")[0] for s in split.val}) == 1  # one whole photo
+    assert not {s.split("-")[0] for s in split.val} & {s.split("-")[0] for s in split.train}
