@@ -10,8 +10,14 @@ the same way. Per image:
   integer width (plain ``2 * dt`` overstates by one pixel, and an even width's skeleton is off centre);
 - connected crack components (8-connected);
 - brightness and contrast: mean and std of luminance (0-255, OpenCV's BT.601 grey);
-- sharpness: variance of the Laplacian of the luminance.
-Widths pool every skeleton pixel of every image; the other rows are percentiles over images.
+- sharpness: variance of the Laplacian of the luminance;
+- label contrast: how dark the labelled crack is against the surface right next to it,
+  (median ring luma - median inside luma) / median ring luma with a 2-px ring
+  (``crackgen.sim.visibility.label_contrast``, the check the renderer's ``[label]`` rule uses):
+  1 is a black crack, 0 an invisible one. Real datasets differ most here: DeepCrack's cracks
+  are dark and wide, hairlines on pavement and bridge concrete are faint.
+Widths pool every skeleton pixel of every image; the other rows are percentiles over images
+(label contrast over the images that have a labelled crack).
 """
 from __future__ import annotations
 
@@ -26,6 +32,7 @@ import cv2
 import numpy as np
 
 from crackgen.errors import CrackgenError
+from crackgen.sim.visibility import label_contrast
 
 IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
@@ -61,6 +68,7 @@ class ImageStats:
     brightness: float
     contrast: float
     sharpness: float
+    label_contrast: float | None  # None without a labelled crack (or its ring)
     size: tuple[int, int]  # (width, height)
     widths: np.ndarray = field(repr=False)
 
@@ -79,6 +87,7 @@ def image_stats(rgb: np.ndarray, mask: np.ndarray) -> ImageStats:
         brightness=float(grey.mean()),
         contrast=float(grey.std()),
         sharpness=float(cv2.Laplacian(grey, cv2.CV_64F).var()),
+        label_contrast=label_contrast(rgb if rgb.ndim == 3 else np.dstack([rgb] * 3), m > 127),
         size=(int(rgb.shape[1]), int(rgb.shape[0])),
         widths=crack_widths(m),
     )
@@ -156,6 +165,7 @@ ROWS = (  # key, label
     ("brightness", "brightness (mean luma, 0-255)"),
     ("contrast", "contrast (luma std)"),
     ("sharpness", "sharpness (Laplacian var)"),
+    ("label_contrast", "label contrast (ring vs crack)"),
 )
 
 
@@ -188,6 +198,7 @@ def compute_stats(path: str | os.PathLike, limit: int | None = None, progress: b
         "brightness": _summary(np.array([p.brightness for p in per])),
         "contrast": _summary(np.array([p.contrast for p in per])),
         "sharpness": _summary(np.array([p.sharpness for p in per])),
+        "label_contrast": _summary(np.array([p.label_contrast for p in per if p.label_contrast is not None])),
     }
     sizes = Counter(f"{w}x{h}" for w, h in (p.size for p in per))
     free = sum(p.fraction == 0 for p in per)

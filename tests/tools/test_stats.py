@@ -64,9 +64,19 @@ def test_image_statistics_on_known_images():
     assert s.fraction == pytest.approx(5 * 80 / (H * W)) and s.components == 1 and s.size == (W, H)
     assert s.brightness == pytest.approx(150, abs=0.5) and s.contrast == pytest.approx(0, abs=1e-6)
     assert s.sharpness == pytest.approx(0, abs=1e-6)
+    assert s.label_contrast == pytest.approx(0.0)  # a label on a flat grey image does not show
     checker = (np.indices((H, W)).sum(0) % 2 * 255).astype(np.uint8)
     c = image_stats(np.dstack([checker] * 3), line(5))
     assert c.contrast == pytest.approx(127.5, abs=1) and c.sharpness > 1e5
+
+
+def test_label_contrast_of_faint_and_dark_cracks():
+    """A crack painted at 90 % / 50 % / 0 % of the surface's grey: contrast 0.1 / 0.5 / 1; none without a crack."""
+    for shade, want in ((0.9, 0.1), (0.5, 0.5), (0.0, 1.0)):
+        img = grey(200)
+        img[line(3) > 0] = round(200 * shade)
+        assert image_stats(img, line(3)).label_contrast == pytest.approx(want, abs=0.01)
+    assert image_stats(grey(200), np.zeros((H, W), np.uint8)).label_contrast is None
 
 
 def cases() -> list[tuple[np.ndarray, np.ndarray]]:
@@ -84,6 +94,7 @@ def check(s: dict) -> None:
     # line skeleton pixels outnumber blob skeleton pixels: the median width is the lines' 5 px
     assert rows["width_px"]["p50"] == pytest.approx(5, abs=0.01)
     assert s["sizes"] == {f"{W}x{H}": 5}
+    assert rows["label_contrast"]["p50"] == pytest.approx(0.0)  # labels on flat grey: nothing shows
 
 
 def test_folder_form(tmp_path, capsys):
