@@ -112,9 +112,10 @@ class LiveScene:
         """
         sc = self.scene
         c = spec.camera
-        if (rig.rgb.width, rig.rgb.height) != (c.width_px, c.height_px):
-            raise SceneUpdateError(f"rig.rgb is {rig.rgb.width}x{rig.rgb.height} but camera spec is {c.width_px}x{c.height_px}")
-        sc.render.resolution_x, sc.render.resolution_y = int(c.width_px), int(c.height_px)
+        out = rig.output_camera(rig.rgb)  # with a lens the scene renders the larger pinhole canvas (rig.rgb)
+        if (out.width, out.height) != (c.width_px, c.height_px):
+            raise SceneUpdateError(f"rig.rgb is {out.width}x{out.height} but camera spec is {c.width_px}x{c.height_px}")
+        sc.render.resolution_x, sc.render.resolution_y = int(rig.rgb.width), int(rig.rgb.height)
         self.surface.update(vertices, maps)
         light_meta = self.lights.update(spec.lights)
         self.sky.update(spec.ambient)

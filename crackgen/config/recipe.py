@@ -21,6 +21,7 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationErr
 from pydantic_core import PydanticCustomError
 
 from crackgen.errors import CrackgenError
+from fusion.lens import Distortion
 
 Scalar = Union[bool, int, float, str]
 
@@ -302,6 +303,17 @@ class ShadowSection(Section):
     offset_m: _t(-100, 100) = _d({"min": -0.3, "max": 0.3}, "occluder centre offset across the light ray (m)")
 
 
+class DistortionSection(Section):
+    """Brown-Conrady lens distortion, OpenCV convention (``fusion.lens``), drawn per sample. Off by default."""
+
+    probability: float = Field(0.0, ge=0, le=1, description="share of samples taken through a distorting lens (0 = pinhole, the default)")
+    k1: _t(-1, 1) = _d({"min": -0.1, "max": 0.05}, "radial k1 (negative = barrel: wide-angle lenses)")
+    k2: _t(-1, 1) = _d({"min": 0.0, "max": 0.04}, "radial k2")
+    k3: _t(-1, 1) = _d(0.0, "radial k3")
+    p1: _t(-0.05, 0.05) = _d({"min": -0.001, "max": 0.001}, "tangential p1 (decentring)")
+    p2: _t(-0.05, 0.05) = _d({"min": -0.001, "max": 0.001}, "tangential p2 (decentring)")
+
+
 class CameraSection(Section):
     width_px: int = Field(512, ge=8, le=16384, description="RGB image width (px)")
     height_px: int = Field(512, ge=8, le=16384, description="RGB image height (px)")
@@ -313,6 +325,27 @@ class CameraSection(Section):
     sensor_width_mm: float = Field(36.0, gt=0, le=100, description="sensor width (mm)")
     principal_jitter_px: _t(-1000, 1000) = _d({"min": -4, "max": 4}, "optical-centre jitter (px)")
     target_jitter_m: _t(-100, 100) = _d({"min": -0.1, "max": 0.1}, "look-at point jitter on the surface (m)")
+    distortion: DistortionSection = Field(default_factory=DistortionSection)
+
+    @model_validator(mode="after")
+    def _lens_does_not_fold(self) -> "CameraSection":
+        """Every lens the ranges allow must map the widest view one-to-one (the warp needs an inverse)."""
+        d = self.distortion
+        if d.probability <= 0:
+            return self
+        f_px = min(self.focal_mm.support()) / self.sensor_width_mm * self.width_px
+        # the corner at the widest view, with the largest principal-point jitter
+        jitter = max(abs(v) for v in self.principal_jitter_px.support())
+        r = math.hypot(self.width_px / 2 + jitter, self.height_px / 2 + jitter) / f_px
+        for k1 in d.k1.support():  # the slope is linear in (k1, k2, k3): its worst case is a corner of the box
+            for k2 in d.k2.support():
+                for k3 in d.k3.support():
+                    if not Distortion(k1=k1, k2=k2, k3=k3).reaches(1.05 * r):
+                        raise PydanticCustomError(
+                            "field_ref", "{sub}: k1 = %g, k2 = %g, k3 = %g fold the lens back before the image corner "
+                            "at the shortest focal_mm (no one-to-one warp); narrow the ranges" % (k1, k2, k3),
+                            {"sub": "distortion"})
+        return self
 
 
 class RenderSection(Section):

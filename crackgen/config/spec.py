@@ -43,6 +43,7 @@ SECTION_STREAMS: dict[str, int] = {
     "lidar": 10,
     "adapt": 11,
     "camera_effects": 12,
+    "lens": 13,
 }
 
 
@@ -281,6 +282,20 @@ class AdaptSpec:
 
 
 @dataclass
+class LensSpec:
+    """Lens distortion of the RGB views (``[camera.distortion]``, OpenCV's Brown-Conrady model, ``fusion.lens``).
+
+    Left out of the sample JSON when off, so pinhole samples read exactly as before it existed."""
+
+    enabled: bool = False
+    k1: float = 0.0
+    k2: float = 0.0
+    p1: float = 0.0
+    p2: float = 0.0
+    k3: float = 0.0
+
+
+@dataclass
 class CameraEffectsSpec:
     """Post-render camera effects of the RGB views (``[camera_effects]``).
 
@@ -326,9 +341,13 @@ class SampleSpec:
     adapt: AdaptSpec = field(default_factory=AdaptSpec)
     camera_effects: CameraEffectsSpec = field(default_factory=CameraEffectsSpec)
     version: int = SPEC_VERSION
+    lens: LensSpec = field(default_factory=LensSpec)
 
     def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        d = dataclasses.asdict(self)
+        if not self.lens.enabled:  # a pinhole sample's JSON is what it was before lenses existed
+            del d["lens"]
+        return d
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), sort_keys=True)
@@ -548,6 +567,15 @@ def _camera(recipe: Recipe, rng: np.random.Generator, baseline_m: float) -> Came
     )
 
 
+def _lens(recipe: Recipe, rng: np.random.Generator) -> LensSpec:
+    d = recipe.camera.distortion
+    if d.probability <= 0:  # off: no draw at all (its own stream, so nothing else moves either way)
+        return LensSpec()
+    on = float(rng.random()) < d.probability
+    k = {name: float(getattr(d, name).draw(rng)) for name in ("k1", "k2", "k3", "p1", "p2")}
+    return LensSpec(enabled=True, **k) if on else LensSpec()
+
+
 def _stereo(recipe: Recipe, rng: np.random.Generator) -> StereoSpec:
     st = recipe.stereo
     baseline = st.baseline_m.draw(rng)  # drawn even when off: the stream stays the same
@@ -708,4 +736,5 @@ def make_spec(recipe: Recipe, index: int, attempt: int = 0) -> SampleSpec:
         stereo=stereo,
         adapt=draw_adapt(recipe.adapt, rng("adapt")),
         camera_effects=draw_camera_effects(recipe.camera_effects, rng("camera_effects")),
+        lens=_lens(recipe, rng("lens")),
     )

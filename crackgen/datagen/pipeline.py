@@ -32,6 +32,7 @@ import crackgen
 from crackgen.config.recipe import Recipe
 from crackgen.config.spec import SampleSpec, make_spec, pixel_footprint_m
 from crackgen.datagen.heap import configure_heap, release_free_heap
+from crackgen.datagen.lens_stage import canvas_coverage, lens_maps, warp_view_members
 from crackgen.errors import CrackgenError
 from crackgen.postrender.stage import adapt_members, camera_effects_members
 from crackgen.postrender.targets import TargetPhotos
@@ -49,7 +50,7 @@ from crackgen.sim.sensors.tof import albedo_from_map, simulate_tof
 from crackgen.sim.visible_gt import visible_ground_truth
 
 STAGES = ("spec", "crackmap", "surface", "materials", "shadow", "scene_update", "render",
-          "raycast", "groundtruth", "tof", "lidar", "stereo", "camera_effects", "adapt")
+          "raycast", "groundtruth", "tof", "lidar", "stereo", "lens", "camera_effects", "adapt")
 SHADOW_PX = 256  # occluder alpha resolution (px per side)
 
 
@@ -198,8 +199,15 @@ class SampleProducer:
             label = view_label(self.recipe.label, cm, gt, out.rgb, attempt, mesh_depth)
         if label.redraw:
             return None
+        lens_map = None
+        if rig.lens is not None:
+            with tm.stage("lens"):
+                lens_map = lens_maps(rig)
         with tm.stage("groundtruth"):
-            visible = visible_ground_truth(cm, rig.rgb, gt.uv)
+            uv = gt.uv  # with a lens: only the canvas pixels the distorted frame shows
+            if lens_map is not None:
+                uv = np.where(canvas_coverage(lens_map, uv.shape[:2])[..., None], uv, np.nan)
+            visible = visible_ground_truth(cm, rig.rgb, uv)
         members: dict[str, Any] = {
             "rgb.png": out.rgb,
             "mask.png": label.mask,
@@ -244,6 +252,11 @@ class SampleProducer:
                 members["disp_lidar.exr"] = st.disp_lidar
             sensors["stereo"] = {"fill_sgm": fill_ratio(st.disp_sgm), "fill_gt": fill_ratio(st.disp_gt),
                                  "sgbm_input": spec.stereo.sgbm_input}
+        if lens_map is not None:  # the lens, before the camera's effects: every RGB-view member, one map
+            with tm.stage("lens"):
+                members = warp_view_members(members, lens_map)
+                if camera_views is not None:  # SGBM matched effect-applied canvas views (sgbm_input = "camera")
+                    camera_views = warp_view_members(camera_views, lens_map)
         # post-render image stages: RGB views only, after every sensor has read the clean render
         # (except SGBM with sgbm_input = "camera": the same effects, applied once, above)
         if camera_views is None:
@@ -275,7 +288,7 @@ class SampleProducer:
                 "present": bool(spec.crack.present),
                 "length_m": None if not np.isfinite(cm.length_m) else float(cm.length_m),
                 "surface_coverage": cm.coverage,
-                "pixel_fraction": crack_pixel_fraction(label.mask),
+                "pixel_fraction": crack_pixel_fraction(members["mask.png"]),
             },
             "label": label.meta,
             "visible": visible,

@@ -2,6 +2,12 @@
 
 Pure numpy, from the SampleSpec only, so the renderer, the ray-cast sensors and
 the written metadata all use the very same K and T (OpenCV convention).
+
+With lens distortion (``spec.lens``) the renderer, the ray caster and every sensor work on a
+pinhole *canvas*: the RGB camera with the same focal length and pose, grown by the margins
+the lens needs (``fusion.lens.canvas_margins``). ``lens_warp`` then turns every RGB-view
+member into the distorted W x H image of the camera that is exported (``rgb_out``: the
+recipe's K, plus the coefficients).
 """
 from __future__ import annotations
 
@@ -11,6 +17,7 @@ import numpy as np
 
 from crackgen.config.spec import SampleSpec
 from fusion.camera import Camera, intrinsics_from_focal, intrinsics_from_fov, look_at, mounted_pose
+from fusion.lens import Distortion, canvas_K, canvas_margins
 
 
 @dataclass(frozen=True)
@@ -19,11 +26,27 @@ class Rig:
     right: Camera | None  # stereo right camera (same K, +baseline along rgb x)
     tof: Camera | None
     T_lidar_world: np.ndarray | None  # LiDAR frame: same axes as the RGB camera (z = sweep centre)
+    lens: Distortion | None = None  # the RGB views' lens; None = pinhole
+    margins: tuple[int, int, int, int] = (0, 0, 0, 0)  # canvas beyond the output frame: left, top, right, bottom
+    K_out: np.ndarray | None = None  # the exported (output) camera's K, with a lens
+
+    def output_camera(self, cam: Camera) -> Camera:
+        """The camera a view is exported as: itself, or with a lens the W x H camera of the recipe's K."""
+        if self.lens is None:
+            return cam
+        l, t, r, b = self.margins
+        return Camera(self.K_out, cam.T_cam_world, cam.width - l - r, cam.height - t - b)
 
     def to_meta(self) -> dict:
-        out = {"rgb": self.rgb.to_meta()}
+        out = {"rgb": self.output_camera(self.rgb).to_meta()}
+        if self.lens is not None:
+            # OpenCV's distCoeffs (k1, k2, p1, p2, k3) of the rgb (and right) view: cv2.undistort(img, K, dist)
+            out["rgb"]["dist"] = self.lens.coeffs.tolist()
+            out["rgb"]["canvas"] = {"margins_ltrb": list(self.margins), "K": self.rgb.K.tolist()}
         if self.right is not None:
-            out["right"] = self.right.to_meta()
+            out["right"] = self.output_camera(self.right).to_meta()
+            if self.lens is not None:
+                out["right"]["dist"] = self.lens.coeffs.tolist()
         if self.tof is not None:
             out["tof"] = self.tof.to_meta()
         if self.T_lidar_world is not None:
@@ -45,6 +68,14 @@ def rgb_camera(spec: SampleSpec) -> Camera:
 
 def make_rig(spec: SampleSpec) -> Rig:
     rgb = rgb_camera(spec)
+    lens, margins, K_out = None, (0, 0, 0, 0), None
+    if spec.lens.enabled:
+        L = spec.lens
+        lens = Distortion(k1=L.k1, k2=L.k2, p1=L.p1, p2=L.p2, k3=L.k3)
+        margins = canvas_margins(rgb.K, lens, rgb.width, rgb.height)
+        K_out = rgb.K
+        rgb = Camera(canvas_K(rgb.K, margins), rgb.T_cam_world, rgb.width + margins[0] + margins[2],
+                     rgb.height + margins[1] + margins[3])
     right = None
     if spec.stereo.enabled and spec.camera.baseline_m > 0:
         right = Camera(rgb.K, mounted_pose(rgb.T_cam_world, [spec.camera.baseline_m, 0.0, 0.0], [0.0, 0.0, 0.0]), rgb.width, rgb.height)
@@ -60,4 +91,4 @@ def make_rig(spec: SampleSpec) -> Rig:
     T_lidar = None
     if spec.lidar.enabled:
         T_lidar = mounted_pose(rgb.T_cam_world, spec.lidar.offset_m, spec.lidar.rotation_rad)
-    return Rig(rgb=rgb, right=right, tof=tof, T_lidar_world=T_lidar)
+    return Rig(rgb=rgb, right=right, tof=tof, T_lidar_world=T_lidar, lens=lens, margins=margins, K_out=K_out)
