@@ -16,7 +16,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from crackgen.config.spec import AmbientSpec, LightSpec
+from crackgen.config.spec import AmbientSpec, LightSpec, SkySpec
 from crackgen.errors import CrackgenError
 
 LIGHT_KINDS = ("sun", "area", "spot", "point")
@@ -72,8 +72,10 @@ class LightPool:
             obj.hide_render = True
             self.objects.append(obj)
 
-    def update(self, lights: list[LightSpec]) -> list[dict]:
-        """Pose and parameterise the first ``len(lights)`` lights, hide the rest; returns their meta."""
+    def update(self, lights: list[LightSpec], sun_scale: float = 1.0) -> list[dict]:
+        """Pose and parameterise the first ``len(lights)`` lights, hide the rest; returns their meta.
+
+        ``sun_scale`` multiplies every sun lamp's strength (an overcast sky dims the sun)."""
         if len(lights) > len(self.objects):
             raise LightError(f"spec has {len(lights)} lights but the scene was built for {len(self.objects)} (max_lights)")
         meta = []
@@ -90,7 +92,7 @@ class LightPool:
                 data.type = s.kind.upper()
                 data = obj.data  # type change re-wraps the datablock as the new subclass
             data.temperature = float(s.color_temp_k)
-            data.energy = float(s.intensity)
+            data.energy = float(s.intensity) * (float(sun_scale) if s.kind == "sun" else 1.0)
             if s.kind == "sun":
                 data.angle = float(s.size_m)
             elif s.kind == "area":
@@ -108,10 +110,20 @@ class LightPool:
         return meta
 
 
+# A Hosek-Wilkie sky (no sun disc) lights a horizontal white plane with 0.05-0.19 of a uniform background of
+# strength 1 (sun 20-70 deg, turbidity 2-8; measured with Cycles). This gain makes a mid sky (45 deg, turbidity 5)
+# as bright as the uniform ambient of the same strength, so ambient_strength keeps its meaning; clear skies are
+# then dimmer and bluer, hazy ones brighter and whiter, as outdoors.
+SKY_GAIN = 8.0
+
+
 class Sky:
-    """World background = uniform ambient sky (Background <- Blackbody), built once."""
+    """The world, two node trees built once: a uniform ambient (Background <- Blackbody) and a procedural
+    daylight sky (Hosek-Wilkie texture x SKY_GAIN, mixed with the uniform colour by the overcast share).
+    ``update`` points the scene at one of them, so samples without a sky render exactly as before."""
 
     def __init__(self, scene: bpy.types.Scene):
+        self.scene = scene
         world = bpy.data.worlds.new("crackgen_world")
         world.use_nodes = True
         nt = world.node_tree
@@ -125,9 +137,45 @@ class Sky:
         self.world = world
         self._strength = bg.inputs["Strength"]
         self._temperature = bb.inputs["Temperature"]
+        self.sky_world = self._build_sky()
 
-    def update(self, ambient: AmbientSpec) -> None:
+    def _build_sky(self) -> bpy.types.World:
+        world = bpy.data.worlds.new("crackgen_sky")
+        world.use_nodes = True
+        nt = world.node_tree
+        nt.nodes.clear()
+        out = nt.nodes.new("ShaderNodeOutputWorld")
+        bg = nt.nodes.new("ShaderNodeBackground")
+        tex = nt.nodes.new("ShaderNodeTexSky")
+        tex.sky_type = "HOSEK_WILKIE"
+        gain = nt.nodes.new("ShaderNodeVectorMath")
+        gain.operation = "SCALE"
+        gain.inputs["Scale"].default_value = SKY_GAIN
+        bb = nt.nodes.new("ShaderNodeBlackbody")
+        mix = nt.nodes.new("ShaderNodeMixRGB")
+        nt.links.new(tex.outputs["Color"], gain.inputs[0])
+        nt.links.new(gain.outputs["Vector"], mix.inputs["Color1"])
+        nt.links.new(bb.outputs["Color"], mix.inputs["Color2"])
+        nt.links.new(mix.outputs["Color"], bg.inputs["Color"])
+        nt.links.new(bg.outputs["Background"], out.inputs["Surface"])
+        self._sky_tex, self._sky_mix = tex, mix.inputs["Fac"]
+        self._sky_strength, self._sky_temperature = bg.inputs["Strength"], bb.inputs["Temperature"]
+        return world
+
+    def update(self, ambient: AmbientSpec, sky: SkySpec | None = None) -> None:
         if not (ambient.strength >= 0 and math.isfinite(ambient.strength)):
             raise LightError(f"ambient.strength must be >= 0, got {ambient.strength!r}")
-        self._strength.default_value = float(ambient.strength)
-        self._temperature.default_value = float(ambient.color_temp_k)
+        if sky is None or not sky.enabled:
+            self.scene.world = self.world
+            self._strength.default_value = float(ambient.strength)
+            self._temperature.default_value = float(ambient.color_temp_k)
+            return
+        if not (1.0 <= sky.turbidity <= 10.0 and 0.0 <= sky.ground_albedo <= 1.0 and 0.0 <= sky.overcast <= 1.0):
+            raise LightError(f"sky: turbidity 1..10, ground_albedo and overcast 0..1, got {sky}")
+        self.scene.world = self.sky_world
+        self._sky_tex.sun_direction = tuple(float(v) for v in light_direction(sky.sun_elevation_rad, sky.sun_azimuth_rad))
+        self._sky_tex.turbidity = float(sky.turbidity)
+        self._sky_tex.ground_albedo = float(sky.ground_albedo)
+        self._sky_mix.default_value = float(sky.overcast)
+        self._sky_strength.default_value = float(ambient.strength)
+        self._sky_temperature.default_value = float(ambient.color_temp_k)

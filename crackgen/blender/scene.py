@@ -117,8 +117,8 @@ class LiveScene:
             raise SceneUpdateError(f"rig.rgb is {out.width}x{out.height} but camera spec is {c.width_px}x{c.height_px}")
         sc.render.resolution_x, sc.render.resolution_y = int(rig.rgb.width), int(rig.rgb.height)
         self.surface.update(vertices, maps)
-        light_meta = self.lights.update(spec.lights)
-        self.sky.update(spec.ambient)
+        light_meta = self.lights.update(spec.lights, sun_scale=1.0 - spec.sky.overcast if spec.sky.enabled else 1.0)
+        self.sky.update(spec.ambient, spec.sky)
         occ = self.occluder.update(spec.shadow, spec.lights, shadow_alpha)
         apply_camera(self.camera, rig.rgb)
         if rig.right is not None:

@@ -291,6 +291,11 @@ class LightsSection(Section):
     color_temp_k: _t(1000, 40000) = _d({"min": 3500, "max": 7500}, "light colour temperature (K)")
     ambient_strength: _t(0, 100) = _d({"min": 0.05, "max": 0.4}, "sky/ambient strength (0 = off)")
     ambient_color_temp_k: _t(1000, 40000) = _d({"min": 5500, "max": 10000}, "sky colour temperature (K)")
+    sky: float = Field(0.0, ge=0, le=1, description="probability that the world is a procedural daylight sky (Hosek-Wilkie; sun where the first sun lamp is) instead of the uniform ambient (0 = off)")
+    sky_turbidity: _t(1, 10) = _d({"min": 2.0, "max": 8.0}, "sky haze (2 = clear blue, 10 = hazy white)")
+    sky_ground_albedo: _t(0, 1) = _d({"min": 0.1, "max": 0.5}, "ground reflectance lighting the sky from below (0..1)")
+    sky_overcast: float = Field(0.3, ge=0, le=1, description="probability that a sky sample is overcast")
+    sky_overcast_amount: _t(0, 1) = _d({"min": 0.6, "max": 1.0}, "overcast: share of the sky that is a uniform cloud deck, and how much the sun lamps are dimmed (0..1)")
 
 
 class ShadowSection(Section):

@@ -44,6 +44,7 @@ SECTION_STREAMS: dict[str, int] = {
     "adapt": 11,
     "camera_effects": 12,
     "lens": 13,
+    "sky": 14,
 }
 
 
@@ -149,6 +150,22 @@ class LightSpec:
 class AmbientSpec:
     strength: float  # world background strength (0 = off)
     color_temp_k: float
+
+
+@dataclass
+class SkySpec:
+    """A procedural daylight sky as the world (``[lights] sky``); left out of the sample JSON when off.
+
+    The sky's sun is where the first sun lamp is (so the sky's bright side, the lamp and its cast
+    shadows agree); without a sun lamp it is the drawn direction. ``overcast`` (0 = clear) is the share
+    of the sky that is a uniform cloud deck and how much every sun lamp is dimmed."""
+
+    enabled: bool = False
+    turbidity: float = 0.0
+    ground_albedo: float = 0.0
+    overcast: float = 0.0
+    sun_elevation_rad: float = 0.0
+    sun_azimuth_rad: float = 0.0
 
 
 @dataclass
@@ -342,11 +359,13 @@ class SampleSpec:
     camera_effects: CameraEffectsSpec = field(default_factory=CameraEffectsSpec)
     version: int = SPEC_VERSION
     lens: LensSpec = field(default_factory=LensSpec)
+    sky: SkySpec = field(default_factory=SkySpec)
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
-        if not self.lens.enabled:  # a pinhole sample's JSON is what it was before lenses existed
-            del d["lens"]
+        for name in ("lens", "sky"):  # off: the sample's JSON is what it was before the option existed
+            if not getattr(self, name).enabled:
+                del d[name]
         return d
 
     def to_json(self) -> str:
@@ -576,6 +595,24 @@ def _lens(recipe: Recipe, rng: np.random.Generator) -> LensSpec:
     return LensSpec(enabled=True, **k) if on else LensSpec()
 
 
+def _sky(recipe: Recipe, rng: np.random.Generator, lights: list[LightSpec]) -> SkySpec:
+    li = recipe.lights
+    if li.sky <= 0:  # off: no draw at all (its own stream)
+        return SkySpec()
+    on = float(rng.random()) < li.sky
+    turbidity, albedo = float(li.sky_turbidity.draw(rng)), float(li.sky_ground_albedo.draw(rng))
+    overcast_on = float(rng.random()) < li.sky_overcast
+    amount = float(li.sky_overcast_amount.draw(rng))
+    elevation, azimuth = math.radians(li.elevation_deg.draw(rng)), math.radians(li.azimuth_deg.draw(rng))
+    sun = next((L for L in lights if L.kind == "sun"), None)
+    if sun is not None:  # the sky's sun is the lamp's: one direction for sky, lamp and cast shadows
+        elevation, azimuth = sun.elevation_rad, sun.azimuth_rad
+    if not on:
+        return SkySpec()
+    return SkySpec(enabled=True, turbidity=turbidity, ground_albedo=albedo, overcast=amount if overcast_on else 0.0,
+                   sun_elevation_rad=float(elevation), sun_azimuth_rad=float(azimuth))
+
+
 def _stereo(recipe: Recipe, rng: np.random.Generator) -> StereoSpec:
     st = recipe.stereo
     baseline = st.baseline_m.draw(rng)  # drawn even when off: the stream stays the same
@@ -737,4 +774,5 @@ def make_spec(recipe: Recipe, index: int, attempt: int = 0) -> SampleSpec:
         adapt=draw_adapt(recipe.adapt, rng("adapt")),
         camera_effects=draw_camera_effects(recipe.camera_effects, rng("camera_effects")),
         lens=_lens(recipe, rng("lens")),
+        sky=_sky(recipe, rng("sky"), lights),
     )

@@ -295,6 +295,8 @@ class SampleProducer:
             "material": {"family": spec.material.family, "distractors": [d.kind for d in spec.material.distractors],
                          "clutter": [c.kind for c in spec.material.clutter], "photo": maps.photo},
             "lights": [{"kind": L.kind, "elevation_deg": float(np.degrees(L.elevation_rad))} for L in spec.lights],
+            **({"sky": {"turbidity": spec.sky.turbidity, "overcast": spec.sky.overcast,
+                        "sun_elevation_deg": float(np.degrees(spec.sky.sun_elevation_rad))}} if spec.sky.enabled else {}),
             "shadow": {"enabled": spec.shadow.enabled, "pattern": spec.shadow.pattern},
             "depth": {
                 "source": "raycast",

@@ -140,7 +140,7 @@ def test_stereo_baseline_comes_from_the_stereo_section():
 
 def test_every_section_differs_between_samples():
     r = parse_recipe('[stereo]\nenabled = true\n[adapt]\ntarget = "photos"\n[camera_effects]\nenabled = true\n'
-                     '[camera.distortion]\nprobability = 1.0')
+                     '[camera.distortion]\nprobability = 1.0\n[lights]\nsky = 1.0')
     a, b = make_spec(r, 0), make_spec(r, 1)
     for name in SECTIONS:
         if name == "surface" or name == "render":
