@@ -178,7 +178,7 @@ def _d(default: Any, doc: str) -> Any:
 
 FAMILIES = ("asphalt", "concrete", "masonry", "steel", "blockwork", "photo")  # = blender_assets/materials/*.toml
 CLUTTER_KINDS = ("pores", "gaps", "stains", "moss", "patch", "voids")  # append only: new kinds draw last  # = crackgen.procedural.clutter.CLUTTER
-SHAPES = ("fbm", "fracture", "network", "hairline")  # = crackgen.procedural.crack_shapes
+SHAPES = ("fbm", "fracture", "network", "hairline", "stairstep")  # = crackgen.procedural.crack_shapes
 
 
 class DatasetSection(Section):
@@ -197,7 +197,9 @@ class CrackSection(Section):
     threshold: _t(0, 1, lo_open=True) = _d({"min": 0.015, "max": 0.04}, "mask = Z < threshold; sets crack width (unitless)")
     depth_m: _t(0, 0.2) = _d({"min": 0.004, "max": 0.015}, "crack depth (m) at the crack centre line")
     probability: float = Field(1.0, ge=0, le=1, description="chance that a sample has a crack at all; the rest are crack-free (fraction)")
-    shape: _c(*SHAPES) = _d({"choices": ["fbm"]}, "crack shape family per sample: fbm (thesis), fracture, network or hairline")
+    shape: _c(*SHAPES) = _d({"choices": ["fbm"]}, "crack shape family per sample: fbm (thesis), fracture, network, hairline or stairstep (along a wall's mortar joints; a fracture on surfaces without bricks)")
+    shape_by_family: dict[str, Annotated[Dist, AfterValidator(_one_of(*SHAPES))]] = Field(
+        default_factory=dict, description="per material family, its own shape distribution instead of shape, e.g. masonry = { choices = [\"stairstep\", \"hairline\"] }")
     width_m: _t(0, 0.5, lo_open=True) = _d(
         {"min": 0.002, "max": 0.012}, "fracture/network: full crack width at its widest point (m)"
     )
@@ -213,6 +215,14 @@ class CrackSection(Section):
         1.0, "fracture/network/hairline: share of the half-width the crack wall slopes over; 1 = V-groove, "
              "smaller = steep walls and a flat floor (fraction)"
     )
+
+    @model_validator(mode="after")
+    def _families_known(self) -> "CrackSection":
+        for fam in self.shape_by_family:
+            if fam not in FAMILIES:
+                raise PydanticCustomError("field_ref", "{sub}: unknown material family %r (known: %s)"
+                                          % (fam, ", ".join(FAMILIES)), {"sub": "shape_by_family"})
+        return self
 
 
 class SurfaceSection(Section):

@@ -443,7 +443,9 @@ def _seed(rng: np.random.Generator) -> int:
     return int(rng.integers(0, 2**31 - 1))
 
 
-def _crack(recipe: Recipe, rng: np.random.Generator) -> CrackSpec:
+def _crack(recipe: Recipe, rng: np.random.Generator, family: str) -> CrackSpec:
+    """``family``: the sample's material family, whose own shape distribution (``shape_by_family``) is used
+    when the recipe gives one; either way the shape is one draw at the same place in the stream."""
     c = recipe.crack
     return CrackSpec(
         freq_x=c.frequency_x.draw(rng),
@@ -459,7 +461,7 @@ def _crack(recipe: Recipe, rng: np.random.Generator) -> CrackSpec:
         # Appended after the thesis draws and always made (whatever the family), so the draws
         # above, and so every fbm map, stay byte-identical for existing recipes.
         present=bool(rng.random() < c.probability),
-        shape=str(c.shape.draw(rng)),
+        shape=str(c.shape_by_family.get(family, c.shape).draw(rng)),
         shape_seed=_seed(rng),
         width_m=c.width_m.draw(rng),
         count=int(c.count.draw(rng)),
@@ -753,13 +755,14 @@ def make_spec(recipe: Recipe, index: int, attempt: int = 0) -> SampleSpec:
     lights = _lights(recipe, rng("lights"))
     stereo = _stereo(recipe, rng("stereo"))
     camera = _camera(recipe, rng("camera"), stereo.baseline_m)  # before the surface: the steps stay below it
+    material = _material(recipe, rng("material"))  # before the crack: its shape may depend on the family
     r = recipe.render
     return SampleSpec(
         index=int(index),
         recipe_seed=int(recipe.dataset.seed),
-        crack=_crack(recipe, rng("crack")),
+        crack=_crack(recipe, rng("crack"), material.family),
         surface=_surface(recipe, rng("surface"), camera),
-        material=_material(recipe, rng("material")),
+        material=material,
         lights=lights,
         ambient=AmbientSpec(strength=li.ambient_strength.draw(a), color_temp_k=li.ambient_color_temp_k.draw(a)),
         shadow=_shadow(recipe, rng("shadow"), len(lights)),

@@ -37,7 +37,7 @@ from crackgen.errors import CrackgenError
 from crackgen.postrender.stage import adapt_members, camera_effects_members
 from crackgen.postrender.targets import TargetPhotos
 from crackgen.procedural.crackmap import crack_map
-from crackgen.procedural.materials import material_maps
+from crackgen.procedural.materials import brick_joints, material_maps
 from crackgen.procedural.shadow_pattern import shadow_alpha
 from crackgen.procedural.surface import mesh_depth_map, surface_faces, surface_uvs, surface_vertices, with_steps
 from crackgen.sim.groundtruth import view_ground_truth, view_label
@@ -170,6 +170,7 @@ class SampleProducer:
                 size_px=spec.surface.crackmap_px,
                 size_m=spec.surface.size_m,
                 pixel_m=pixel_footprint_m(spec.camera),
+                joints=brick_joints(spec.material) if spec.crack.shape == "stairstep" else None,
             )
         with tm.stage("surface"):
             g = spec.surface.grid_px

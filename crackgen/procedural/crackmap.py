@@ -34,6 +34,7 @@ from crackgen.procedural.crack_shapes.fracture import fracture_paths
 from crackgen.procedural.crack_shapes.hairline import DEPTH_SCALE, hairline_width_m
 from crackgen.procedural.crack_shapes.network import network_paths
 from crackgen.procedural.crack_shapes.paths import MIN_HALF_WIDTH_PX, render_paths, to_texels
+from crackgen.procedural.crack_shapes.stairstep import JointGrid, stairstep_paths
 from crackgen.procedural.noise import fbm
 from fusion.crack_length import crack_components, skeleton
 
@@ -110,7 +111,8 @@ def _check(spec: CrackSpec, size_px: int, size_m: float, pixel_m: float | None) 
 
 
 def crack_map(
-    spec: CrackSpec, size_px: int, size_m: float, *, measure: bool = True, pixel_m: float | None = None
+    spec: CrackSpec, size_px: int, size_m: float, *, measure: bool = True, pixel_m: float | None = None,
+    joints: JointGrid | None = None,
 ) -> CrackMap:
     """Evaluate the crack map of ``spec`` on an N x N texel grid over a ``size_m`` square.
 
@@ -118,6 +120,8 @@ def crack_map(
     only need the displacement, e.g. previews and benchmarks. ``pixel_m`` is the camera
     pixel's footprint on the surface (m, ``crackgen.config.spec.pixel_footprint_m``); only
     ``hairline`` uses it, and without it a hairline is ``hairline_px`` texels wide.
+    ``joints``: the wall's mortar joints (``materials.brick_joints``) that a ``stairstep``
+    crack follows; without them (a surface with no bricks) it is drawn as a ``fracture``.
     """
     _check(spec, size_px, size_m, pixel_m)
     n = int(size_px)
@@ -130,7 +134,7 @@ def crack_map(
     elif spec.shape == "fbm":
         z, mask, disp, depth = _fbm_layers(spec, n)
     else:
-        z, mask, disp, depth = _path_layers(spec, n, float(size_m), pixel_m)
+        z, mask, disp, depth = _path_layers(spec, n, float(size_m), pixel_m, joints)
     skel: np.ndarray | None = None
     length = float("nan")
     if measure:
@@ -153,7 +157,8 @@ def _fbm_layers(spec: CrackSpec, n: int) -> tuple[np.ndarray, ...]:
     return z, mask, disp, depth
 
 
-def _path_layers(spec: CrackSpec, n: int, size_m: float, pixel_m: float | None) -> tuple[np.ndarray, ...]:
+def _path_layers(spec: CrackSpec, n: int, size_m: float, pixel_m: float | None,
+                 joints: JointGrid | None = None) -> tuple[np.ndarray, ...]:
     """Path families: Z = d / w (clipped to 1), M = Z < 1, D = min(1, (1 - Z) / wall) inside,
     depth = D * centre depth. ``wall`` = 1 is the V-groove; smaller walls are steeper, with a flat
     floor between them, as in an open fracture whose faces have pulled apart."""
@@ -161,7 +166,9 @@ def _path_layers(spec: CrackSpec, n: int, size_m: float, pixel_m: float | None) 
     centre_depth = spec.depth_m
     if spec.shape == "network":
         paths = network_paths(spec, 0.5 * spec.width_m / size_m, rng)
-    elif spec.shape == "fracture":
+    elif spec.shape == "stairstep" and joints is not None:
+        paths = stairstep_paths(spec, 0.5 * spec.width_m / size_m, joints, size_m, rng)
+    elif spec.shape in ("fracture", "stairstep"):  # a stairstep crack on a surface without joints: a fracture
         paths = fracture_paths(spec, 0.5 * spec.width_m / size_m, rng, MIN_HALF_WIDTH_PX / n)
     else:  # hairline; narrower than a texel -> widened to one texel by render_paths
         width_m = hairline_width_m(spec, pixel_m if pixel_m is not None else size_m / n)

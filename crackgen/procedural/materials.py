@@ -31,6 +31,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from crackgen.config.spec import MaterialSpec
 from crackgen.errors import CrackgenError
 from crackgen.procedural.clutter import CLUTTER, paint_clutter
+from crackgen.procedural.crack_shapes.stairstep import JointGrid
 from crackgen.procedural.distractors import DISTRACTORS, paint_distractor
 from crackgen.procedural.photo import PhotoError, PhotoLook, photo_folder, photo_maps
 from crackgen.procedural.texgrid import TexGrid, clip01, quantile_fast, smoothstep
@@ -302,6 +303,7 @@ def material_maps(spec: MaterialSpec, cm: CrackMapLike, mesh_depth_m: np.ndarray
 
     # Per-sample base colour: family variation, then the spec's hue / value draws.
     base = np.asarray(fam.base_color, np.float64)
+    # (brick_joints repeats these two draws: keep them first, and keep their order)
     base = base * math.exp(fam.color_variation * rng.normal()) * (1.0 + 0.3 * fam.color_variation * rng.normal(size=3))
     albedo = np.empty((px, px, 3), np.float32)
     albedo[:] = base.astype(np.float32)
@@ -558,9 +560,28 @@ def _paint_bricks(x, ox, oy, pitch_x, pitch_y, mortar, bond, bevel, jit_x, jit_y
             height[j, i] += depth * w
 
 
-def _bricks(b: Bricks, grid: TexGrid, rng: np.random.Generator, albedo, roughness, height) -> None:
+def _brick_origin(b: Bricks, rng: np.random.Generator) -> tuple[float, float, float, float]:
+    """(pitch_x, pitch_y, ox, oy): the bond's pitch and its random origin, the first draws of ``_bricks``."""
     pitch_x, pitch_y = b.size_m[0] + b.mortar_m, b.size_m[1] + b.mortar_m
-    ox, oy = rng.uniform(0, pitch_x), rng.uniform(0, pitch_y)
+    return pitch_x, pitch_y, float(rng.uniform(0, pitch_x)), float(rng.uniform(0, pitch_y))
+
+
+def brick_joints(spec: MaterialSpec) -> JointGrid | None:
+    """The mortar joint layout ``material_maps`` paints for ``spec`` (None for a family without bricks):
+    the same draws from the same stream, so a crack can follow the very joints of the wall."""
+    fam = load_family(spec.family)
+    if fam.bricks is None:
+        return None
+    rng = _rng(spec.seed, 0)
+    rng.normal()  # the base colour's two draws in material_maps, then _bricks' origin
+    rng.normal(size=3)
+    pitch_x, pitch_y, ox, oy = _brick_origin(fam.bricks, rng)
+    return JointGrid(pitch_x=pitch_x, pitch_y=pitch_y, mortar_m=fam.bricks.mortar_m, bond=fam.bricks.bond_offset,
+                     ox=ox, oy=oy)
+
+
+def _bricks(b: Bricks, grid: TexGrid, rng: np.random.Generator, albedo, roughness, height) -> None:
+    pitch_x, pitch_y, ox, oy = _brick_origin(b, rng)
     if b.edge_noise_m > 0:
         f = grid.field(_seed(rng), 0.03, 2) * np.float32(b.edge_noise_m)
         jx, jy = f, np.ascontiguousarray(f.T)  # transposed: a second, nearly independent field
