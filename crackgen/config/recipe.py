@@ -233,6 +233,15 @@ class SurfaceSection(Section):
     step_height_m: _t(0.001, 1) = _d({"min": 0.02, "max": 0.15}, "height of each step, raised side towards the cameras (m)")
     step_offset: _t(-0.5, 0.5) = _d({"min": -0.2, "max": 0.2}, "signed distance of a step's line from the patch centre (fraction of the side)")
     step_max_rise: float = Field(0.3, gt=0, le=0.8, description="the steps' total height is scaled down to at most this fraction of the camera's height above the patch (fraction)")
+    size_fov: _t(0, 20) = _d(0.0, "patch side as a multiple of the camera's view width at the look-at point (0 = off: size_m); for recipes whose distance spans close-ups to metres")
+
+    @model_validator(mode="after")
+    def _fov_all_or_nothing(self) -> "SurfaceSection":
+        sup = self.size_fov.support()
+        if any(v > 0 for v in sup) and not all(v >= 0.5 for v in sup):
+            raise PydanticCustomError("field_ref", "{sub}: 0 (off) or every value >= 0.5 (the patch must cover the view)",
+                                      {"sub": "size_fov"})
+        return self
 
 
 class DistractorSection(Section):

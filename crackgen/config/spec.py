@@ -724,13 +724,19 @@ def draw_camera_effects(c: CameraEffectsSection, rng: np.random.Generator) -> Ca
 
 
 def _surface(recipe: Recipe, rng: np.random.Generator, camera: CameraSpec) -> SurfaceSpec:
-    """Patch size, then the steps (drawn after it, so a recipe without steps keeps its sizes).
+    """Patch size (``size_m``, or ``size_fov`` times the camera's view width), then the steps (drawn after
+    it, so a recipe without steps keeps its sizes).
 
     Steps add up (terraces), so their total height is capped at ``step_max_rise`` of the
     camera's height above the patch: four 25 cm steps under a camera 0.6 m up would put the
     surface at the lens (a measured 3400 px disparity), and disparity grows as 1 / (1 - rise)."""
     s = recipe.surface
-    size = float(s.size_m.draw(rng))
+    if max(s.size_fov.support()) > 0:  # sized to the view (a new option: its own draw order)
+        c = camera
+        view = pixel_footprint_m(c) * max(c.width_px, c.height_px) / max(math.cos(c.tilt_rad), 0.2)
+        size = float(s.size_fov.draw(rng)) * view + 2.0 * max(abs(c.target_x_m), abs(c.target_y_m))
+    else:
+        size = float(s.size_m.draw(rng))
     steps = [StepSpec(angle_rad=float(rng.uniform(0.0, math.pi)), offset_m=float(s.step_offset.draw(rng)) * size,
                       height_m=float(s.step_height_m.draw(rng))) for _ in range(int(s.steps.draw(rng)))]
     cap = s.step_max_rise * camera.distance_m * math.cos(camera.tilt_rad)

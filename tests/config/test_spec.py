@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from crackgen.config.recipe import Recipe, parse_recipe
+from crackgen.config.recipe import Recipe, RecipeError, parse_recipe
 from crackgen.config.spec import SECTION_STREAMS, SPEC_VERSION, SampleSpec, make_spec, section_rng
 
 
@@ -166,3 +166,24 @@ def test_adapt_draws_follow_the_recipe():
     assert all(a.band == 0.0 for a in on if a.method == "histogram")
     assert all(0.0 <= a.target_fraction < 1.0 and a.target == "photos" for a in on)
     assert not any(a.enabled for a in (make_spec(parse_recipe(""), i).adapt for i in range(5)))
+
+
+def test_size_fov_makes_the_patch_cover_the_view_at_every_distance():
+    from crackgen.sim.rig import make_rig
+
+    r = parse_recipe("[surface]\nsize_fov = { min = 1.3, max = 1.6 }\n[camera]\nwidth_px = 256\nheight_px = 192\n"
+                     "distance_m = { choices = [0.3, 1.0, 3.0] }\ntilt_deg = { min = 0, max = 20 }\n")
+    sizes = {}
+    for i in range(30):
+        s = make_spec(r, i)
+        cam = make_rig(s).rgb
+        origins, dirs, _ = cam.pixel_rays()
+        corners = [0, cam.width - 1, (cam.height - 1) * cam.width, cam.height * cam.width - 1]
+        t = -origins[corners, 2] / dirs[corners, 2]  # where the corner rays meet the surface plane z = 0
+        hit = origins[corners, :2] + t[:, None] * dirs[corners, :2]
+        assert np.abs(hit).max() < s.surface.size_m / 2, (i, s.camera.distance_m)
+        sizes.setdefault(s.camera.distance_m, []).append(s.surface.size_m)
+    assert min(sizes[3.0]) > 5 * max(sizes[0.3])  # the patch grows with the view
+    assert make_spec(parse_recipe(""), 0).surface == make_spec(parse_recipe("[surface]\nsize_fov = 0\n"), 0).surface
+    with pytest.raises(RecipeError, match="surface.size_fov: 0 \\(off\\) or every value >= 0.5"):
+        parse_recipe("[surface]\nsize_fov = { choices = [0, 1.5] }\n")
