@@ -188,13 +188,13 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
 
 
 def _cmd_stats(args: argparse.Namespace) -> int:
-    from crackgen.tools.stats import StatsError, compute_stats, format_stats, write_json
+    from crackgen.tools.stats import StatsError, compute_stats, format_side_by_side, format_stats, write_json
 
     try:
-        result = compute_stats(args.path, limit=args.limit, progress=not args.no_progress)
-        print(format_stats(result))
+        results = [compute_stats(p, limit=args.limit, progress=not args.no_progress) for p in args.path]
+        print(format_stats(results[0]) if len(results) == 1 else format_side_by_side(results))
         if args.json:
-            print(f"wrote {write_json(result, args.json)}")
+            print(f"wrote {write_json(results[0] if len(results) == 1 else results, args.json)}")
     except StatsError as exc:
         return _err(str(exc))
     return 0
@@ -307,7 +307,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     st = sub.add_parser("stats", help="crack width, pixel fraction, components and image statistics "
                                       "of shards or an images/ + masks/ folder")
-    st.add_argument("path", metavar="DIR|FOLDER", help="a crackgen dataset, or a folder with images/ and masks/")
+    st.add_argument("path", metavar="DIR|FOLDER", nargs="+",
+                    help="a crackgen dataset, or a folder with images/ and masks/; several: one table side by side")
     st.add_argument("--json", default=None, metavar="OUT", help="also write the statistics as JSON")
     st.add_argument("--limit", type=int, default=None, help="at most this many images")
     st.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -111,6 +111,18 @@ def test_folder_form(tmp_path, capsys):
     assert "crack width (px)" in text and "crack-free images: 20.0 % (1 of 5)" in text and f"wrote {out}" in text
     check(json.loads(out.read_text()))
     assert compute_stats(root, limit=2, progress=False)["images"] == 2
+    # two folders side by side: one row per statistic, one p10/p50/p90 block per folder
+    other = tmp_path / "other"
+    (other / "images").mkdir(parents=True)
+    (other / "masks").mkdir()
+    cv2.imwrite(str(other / "images" / "x.png"), grey(90))
+    cv2.imwrite(str(other / "masks" / "x.png"), line(3))
+    assert main(["stats", str(root), str(other), "--json", str(out), "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    assert "real (5)" in text and "other (1)" in text
+    width_row = next(t for t in text.splitlines() if t.startswith("crack width (px)")).split()
+    assert [float(v) for v in width_row[3:]] == pytest.approx([5, 5, 5, 3, 3, 3], abs=0.01)
+    assert [r["images"] for r in json.loads(out.read_text())] == [5, 1]
 
 
 def test_shard_form(tmp_path):
