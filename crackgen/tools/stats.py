@@ -232,15 +232,15 @@ def _column_title(r: dict[str, Any], width: int) -> str:
 def format_side_by_side(results: list[dict[str, Any]]) -> str:
     """Several datasets or folders in one table (p10 / p50 / p90 of each), to hold renders against real photos."""
     def cell(v: float | None) -> str:
-        return f"{'-':>8}" if v is None else f"{v:8.3g}" if abs(v) < 1e4 else f"{v:8.0f}"
+        return f"{'-':>9}" if v is None else f"{v:9.3g}" if abs(v) < 1e4 else f"{v:9.0f}"
 
-    width = 24
+    width = 27
     head = f"{'':<30}" + "".join(f"{_column_title(r, width):>{width}}"
                                  for r in results)
-    lines = [head, f"{'statistic':<30}" + "".join(f"{'p10':>8}{'p50':>8}{'p90':>8}" for _ in results)]
+    lines = [head, f"{'statistic':<30}" + "".join(f"{'p10':>9}{'p50':>9}{'p90':>9}" for _ in results)]
     for key, label in ROWS:
         lines.append(f"{label:<30}" + "".join(cell(r["rows"][key][c]) for r in results for c in ("p10", "p50", "p90")))
-    lines.append(f"{'crack-free images (%)':<30}" + "".join(f"{r['crack_free_pct']:>24.1f}" for r in results))
+    lines.append(f"{'crack-free images (%)':<30}" + "".join(f"{r['crack_free_pct']:>27.1f}" for r in results))
     return "\n".join(lines)
 
 
