@@ -25,6 +25,7 @@ from tqdm import tqdm
 
 from trainer.builders import add_split_args
 from trainer.checkpoint import load_checkpoint
+from trainer.error_overlays import describe_errors
 from trainer.errors import TrainerInputError
 from trainer.eval_sets import (
     CROSS_DOMAIN_SETS,
@@ -56,6 +57,10 @@ def add_benchmark_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--real-root", default=DEFAULT_REAL_ROOT, help="folder the default sets are under")
     p.add_argument("--out", required=True, help="writes benchmark.csv, benchmark.md, benchmark.png, benchmark.json")
     p.add_argument("--title", default=None, help="title of the markdown page and the chart")
+    p.add_argument("--errors", type=int, default=0, metavar="N",
+                   help="also describe what the first model of each row gets wrong on each set: its N images with the "
+                        "most false-positive pixels as overlays (OUT/errors/ROW/SET/), and its false positives as line- "
+                        "or blob-like, darker or brighter than their surround (0: off)")
     p.add_argument("--workers", "-j", type=int, default=2)
     p.add_argument("--device", default=None)
     p.add_argument("--no-progress", action="store_true")
@@ -109,6 +114,33 @@ def build_entries(args: argparse.Namespace, device: torch.device, sets: list[Eva
     return entries
 
 
+def error_table(entries: list[ModelEntry], sets: list[EvalSet], out: Path, worst: int) -> list[str]:
+    """``--errors``: per row (its first model) and set, what it gets wrong (``trainer.error_overlays``)."""
+    firsts = {e.label: e for e in reversed(entries)}
+    lines = ["", f"What the first model of each row gets wrong, at its validation threshold (false-positive pixels by the "
+             f"shape and darkness of their component; overlays of the {worst} images with the most false positives: "
+             "true positives green, false positives red, missed crack blue):", "",
+             "| model | set | FP px | images with FP | FP line-like | FP darker than surround | FP brighter | overlays |",
+             "|---|---|---|---|---|---|---|---|"]
+    record = {}
+    for label, e in reversed(list(firsts.items())):
+        for s in sets:
+            folder = out / "errors" / _slug(label) / s.name
+            r = describe_errors(s.folder, e.scorer.probability, e.threshold, folder, worst)
+            e.scorer.release()
+            record.setdefault(label, {})[s.name] = r
+            links = " ".join(f"[{i + 1}]({Path(p).relative_to(out)})" for i, p in enumerate(r["overlays"]))
+            lines.append(f"| {label} | {s.name} | {r['fp']} | {r['images_with_fp']} of {r['images']} | "
+                         f"{100 * r['fp_line_like']:.0f} % | {100 * r['fp_darker_than_surround']:.0f} % | "
+                         f"{100 * r['fp_brighter_than_surround']:.0f} % | {links} |")
+    (out / "errors.json").write_text(json.dumps(record, indent=1))
+    return lines
+
+
+def _slug(text: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)
+
+
 def run_benchmark(args: argparse.Namespace) -> dict[str, Any]:
     out = Path(args.out)
     device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
@@ -129,9 +161,10 @@ def run_benchmark(args: argparse.Namespace) -> dict[str, Any]:
 
     rows = score_all(entries, sets, done)
     bar.close()
+    errors = error_table(entries, sets, out, args.errors) if args.errors > 0 else []
     title = args.title or f"benchmark of {len(entries)} models on {len(sets)} sets"
     write_csv(rows, out / "benchmark.csv")
-    md = [f"# {title}", "", *markdown_lines(rows, sets)]
+    md = [f"# {title}", "", *markdown_lines(rows, sets), *errors]
     (out / "benchmark.md").write_text("\n".join(md) + "\n")
     plot_bars(rows, sets, out / "benchmark.png", title)
     result = {"models": len(entries), "labels": len({e.label for e in entries}), "sets": [s.name for s in sets],

@@ -101,5 +101,10 @@ class CheckpointScorer:
         return evaluate(model, loader, self.device,
                         self.device.type == "cuda", progress=self.progress)
 
+    def probability(self, sample: dict[str, Any]) -> np.ndarray:
+        """Crack probability of one decoded sample at its native size (for per-image error reports)."""
+        model, cfg = self._load()
+        return predict_probability(model, cfg, sample, self.device)
+
     def release(self) -> None:
         self._model = None

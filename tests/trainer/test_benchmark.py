@@ -1,7 +1,9 @@
 """cracktrain benchmark: the table on hand-made models and folders, thresholds from validation, refusals."""
 import argparse
 import csv
+import json
 import math
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -117,6 +119,12 @@ def test_benchmark_cli_scores_checkpoints_at_their_validation_threshold(tiny, tm
     assert len(rows) == 2 and {r["set"] for r in rows} == {"other"}
     assert rows[0]["threshold_source"] == "benchmark --val v"  # the tiny model stored none: chosen on --val
     assert (out / "benchmark.png").stat().st_size > 0 and "| tiny | 2 |" in (out / "benchmark.md").read_text()
+    # --errors: what the row's first model gets wrong, with overlays of its worst images
+    assert main(["benchmark", f"tiny={tiny['ckpt']}", "--set", f"other={other}", "--val", f"v={val}", "--errors", "2",
+                 "--out", str(tmp_path / "e"), "-j", "0", "--no-progress"]) == 0
+    errors = json.loads((tmp_path / "e" / "errors.json").read_text())["tiny"]["other"]
+    assert errors["images"] == 4 and len(errors["overlays"]) <= 2 and errors["fp"] >= 0
+    assert all(Path(p).is_file() for p in errors["overlays"]) and "| tiny | other |" in (tmp_path / "e" / "benchmark.md").read_text()
     # flipping every label of the scored set leaves the threshold as it was: it never looks at them
     flipped = tmp_path / "flipped"
     write_real_folder(flipped, n=4)
