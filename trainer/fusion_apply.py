@@ -64,7 +64,7 @@ def fuse_scene(model: ConfidenceCNN, cfg: dict[str, Any], x: np.ndarray, device:
     measurement (``stereo_valid`` False) the rules take the ToF/LiDAR value, as they
     do for any candidate without a value. On the flat renders the filled holes
     (mostly SGBM's left band) are good extrapolations and ``cnn`` is better; on real
-    scenes they span occlusions and ``other`` is better (README, *Depth fusion*).
+    scenes they span occlusions and ``other`` is better (docs/results/depth-fusion.md).
     """
     if stereo_holes not in STEREO_HOLES:
         raise TrainerInputError(f"--stereo-holes must be one of {', '.join(STEREO_HOLES)}, got {stereo_holes!r}")

@@ -94,7 +94,7 @@ ADAPT_RUNS = {"synthetic+fourier": "fourier", "synthetic+reinhard": "reinhard",
 BN_RUN = "synthetic+bn"  # target BN on the synthetic row's model
 PSEUDO_RUN = "synthetic+pseudo"  # self-training on the target photos from the synthetic row's model
 TARGET_RUNS = (*ADAPT_RUNS, BN_RUN, PSEUDO_RUN)  # rows that need --target
-# with --target and no --runs; self-training is asked for by name (it lowered DeepCrack F1, README)
+# with --target and no --runs; self-training is asked for by name (it helps on some sets and hurts on others: docs/results/sim2real.md)
 DEFAULT_TARGET_RUNS = (*ADAPT_RUNS, BN_RUN)
 
 

@@ -1,5 +1,8 @@
-"""Recipe reference as Markdown, generated from the schema so the README cannot drift."""
+"""Recipe reference as Markdown, generated from the schema so docs/recipes.md cannot drift."""
 from __future__ import annotations
+
+import sys
+from pathlib import Path
 
 from pydantic import BaseModel
 
@@ -34,5 +37,20 @@ def reference_markdown() -> str:
     return "\n".join(out)
 
 
+def write(doc: Path) -> bool:
+    """Replace the generated block of ``doc`` (True when it changed); the rest of the page is kept."""
+    text = doc.read_text()
+    if BEGIN not in text or END not in text:
+        raise SystemExit(f"{doc}: no recipe-reference block to fill")
+    head, rest = text.split(BEGIN, 1)
+    new = head + reference_markdown() + rest.split(END, 1)[1]
+    doc.write_text(new)
+    return new != text
+
+
 if __name__ == "__main__":
-    print(reference_markdown())
+    if sys.argv[1:] == ["--write"]:
+        doc = Path(__file__).resolve().parents[2] / "docs" / "recipes.md"
+        print(f"{doc}: {'rewritten' if write(doc) else 'already up to date'}", file=sys.stderr)
+    else:
+        print(reference_markdown())
