@@ -24,7 +24,8 @@ KEPT_KEYS = ("args", "sample_config", "step", "epoch", "best", "world_size")
 
 
 def add_adapt_bn_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("checkpoint", help="trained cracktrain checkpoint (RGB model)")
+    p.add_argument("--checkpoint", "-c", default=None, help="trained cracktrain checkpoint (RGB model)")
+    p.add_argument("model", nargs="?", default=None, help=argparse.SUPPRESS)  # old positional, deprecated
     p.add_argument("--target", required=True, metavar="FOLDER", help="folder of unlabeled photos of the site")
     p.add_argument("--out", required=True, metavar="CKPT", help="new checkpoint to write (must differ from the source)")
     p.add_argument("--batches", type=int, default=DEFAULT_BATCHES, help="batches of photo crops averaged")

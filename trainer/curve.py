@@ -39,9 +39,9 @@ def parse_sizes(text: str) -> list[int]:
     try:
         sizes = sorted({int(t) for t in text.split(",") if t.strip()})
     except ValueError:
-        raise TrainerInputError(f"--curve: expected comma-separated photo counts, got {text!r}") from None
+        raise TrainerInputError(f"--sizes: expected comma-separated photo counts, got {text!r}") from None
     if not sizes or sizes[0] < 0:
-        raise TrainerInputError(f"--curve: counts must be >= 0, got {text!r}")
+        raise TrainerInputError(f"--sizes: counts must be >= 0, got {text!r}")
     return sizes
 
 

@@ -1,4 +1,4 @@
-"""``cracktrain fuse-images``: guided-filter fusion of an exposure or focus stack, with its quality scores.
+"""``cracktrain merge-stack``: guided-filter fusion of an exposure or focus stack, with its quality scores.
 
 Reads N registered images of one size (8- or 16-bit, grey or colour), fuses them with
 ``fusion.image_fusion`` (2-level, or the thesis's 3-level), writes the fused image (8-bit, or
@@ -42,7 +42,7 @@ def run_fuse(args: argparse.Namespace) -> dict:
     from fusion.image_fusion import FusionError, fuse_images
 
     if len(args.images) < 2:
-        raise TrainerInputError(f"fuse-images needs at least 2 images, got {len(args.images)}")
+        raise TrainerInputError(f"merge-stack needs at least 2 images, got {len(args.images)}")
     loaded = [_read(p) for p in args.images]
     imgs = [a for a, _ in loaded]
     ndims = {a.ndim for a in imgs}

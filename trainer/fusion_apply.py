@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from crackgen.cli_aliases import deprecated_alias
 from fusion.confidence import fuse_max, fuse_weighted, softmax_weights
 from fusion.depth_metrics import disparity_metrics
 from fusion.fusion_inputs import VARIANTS, FusionInputError, build_inputs
@@ -101,7 +102,8 @@ def add_post_args(p: argparse.ArgumentParser, default: str) -> None:
 
 
 def add_fuse_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--ckpt", required=True, help="checkpoint from cracktrain fusion")
+    p.add_argument("--checkpoint", "-c", dest="ckpt", default=None, help="checkpoint from cracktrain fusion")
+    deprecated_alias(p, "--ckpt", "--checkpoint", "cracktrain")
     p.add_argument("--stereo", required=True, help="stereo disparity in the left view (px; any stereo method)")
     p.add_argument("--other", required=True, help="ToF or LiDAR disparity in the left view (px; sparse or completed)")
     p.add_argument("--left", required=True, help="left image")

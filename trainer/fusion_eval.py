@@ -21,6 +21,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from crackgen.cli_aliases import deprecated_alias
 from fusion.depth_metrics import average_metrics, disparity_metrics, format_table
 from fusion.fusion_inputs import LIDAR_VARIANTS, OTHER_NAME
 from fusion.postfilter import PostFilter
@@ -31,7 +32,8 @@ from trainer.fusion_real import add_real_args, real_scene
 
 
 def add_fusion_eval_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--ckpt", required=True, help="checkpoint from cracktrain fusion")
+    p.add_argument("--checkpoint", "-c", dest="ckpt", default=None, help="checkpoint from cracktrain fusion")
+    deprecated_alias(p, "--ckpt", "--checkpoint", "cracktrain")
     p.add_argument("--data", default=None, help="shards to score (default: the checkpoint's --data)")
     p.add_argument("--keys", choices=("val", "all"), default="val",
                    help="val: the checkpoint's held-out samples; all: every sample of --data")

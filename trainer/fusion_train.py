@@ -27,6 +27,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from crackgen.cli_aliases import deprecated_alias
 from fusion.confidence import confidence_target, fuse_max
 from fusion.densify import METHODS as DENSIFY_METHODS
 from fusion.depth_metrics import disparity_metrics
@@ -64,9 +65,11 @@ def add_fusion_args(p: argparse.ArgumentParser) -> None:
                         "L-R diff warped by the LiDAR); lidar4: lidar + the L-R diff warped by the stereo")
     p.add_argument("--val-fraction", type=float, default=0.2, help="held-out fraction of the samples")
     p.add_argument("--split-seed", type=int, default=0)
-    p.add_argument("--patch", type=int, default=128, help="random patch side (px)")
+    p.add_argument("--crop", dest="patch", type=int, default=128, help="random patch side (px)")
+    deprecated_alias(p, "--patch", "--crop", "cracktrain")
     p.add_argument("--batch-size", "-b", type=int, default=32)
-    p.add_argument("--steps", type=int, default=2000, help="optimizer steps")
+    p.add_argument("--max-steps", dest="steps", type=int, default=2000, help="optimizer steps")
+    deprecated_alias(p, "--steps", "--max-steps", "cracktrain")
     p.add_argument("--optimizer", choices=OPTIMIZERS, default="adadelta")
     p.add_argument("--lr", type=float, default=0.01)
     p.add_argument("--rotate-deg", type=float, default=5.0)
@@ -230,7 +233,7 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
     if args.threads > 0:
         torch.set_num_threads(args.threads)
     if args.batch_size < 1 or args.patch < 8 or args.steps < 0:
-        raise TrainerInputError("--batch-size must be >= 1, --patch >= 8 and --steps >= 0")
+        raise TrainerInputError("--batch-size must be >= 1, --crop >= 8 and --max-steps >= 0")
     if not 0.0 <= args.stereo_failures <= 1.0:
         raise TrainerInputError(f"--stereo-failures must be a probability in [0, 1], got {args.stereo_failures}")
     if args.stereo_failures > 0 and args.variant not in LIDAR_VARIANTS:

@@ -177,7 +177,9 @@ def write_pseudo_folder(photos: Sequence[str | Path], out: str | Path, settings:
 
 
 def add_pseudo_label_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("checkpoint", help="trained cracktrain checkpoint (RGB model), e.g. a synthetic-only model")
+    p.add_argument("--checkpoint", "-c", default=None,
+                   help="trained cracktrain checkpoint (RGB model), e.g. a synthetic-only model")
+    p.add_argument("model", nargs="?", default=None, help=argparse.SUPPRESS)  # old positional, deprecated
     p.add_argument("--target", required=True, metavar="FOLDER", help="folder of unlabeled photos of the site")
     p.add_argument("--out", required=True, metavar="FOLDER", help="new real folder: images/, masks/, ignore/")
     p.add_argument("--portion", type=float, default=0.5, help="share of the predicted crack pixels kept as labels")

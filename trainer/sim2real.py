@@ -35,7 +35,7 @@ the test set is that folder and ``--real`` is split into train / validation. The
 written to ``OUT/split.json``. Rows whose inputs are missing are skipped. Cross-domain sets
 are scored on the finished rows by ``cracktrain benchmark OUT``.
 
-``--synthetic`` may also be a folder of images/ + masks/ from another generator (a 2-D one
+``--data`` may also be a folder of images/ + masks/ from another generator (a 2-D one
 such as Syncrack): it trains the ``synthetic`` row only.
 """
 from __future__ import annotations
@@ -51,6 +51,7 @@ from typing import Any
 
 import torch
 
+from crackgen.cli_aliases import deprecated_alias
 from trainer.adapt_bn import adapt_checkpoint
 from trainer.builders import (
     add_data_args,
@@ -98,12 +99,14 @@ TARGET_RUNS = (*ADAPT_RUNS, BN_RUN, PSEUDO_RUN)  # rows that need --target
 DEFAULT_TARGET_RUNS = (*ADAPT_RUNS, BN_RUN)
 
 
-def add_sim2real_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--synthetic", default=None, help="synthetic shards (A,B: several datasets together)")
+def add_experiment_args(p: argparse.ArgumentParser, *, out: str) -> None:
+    """What sim2real and the curve share: the data, its grouped split, the model and its budget."""
+    p.add_argument("--data", dest="synthetic", default=None, help="synthetic shards (A,B: several datasets together)")
+    deprecated_alias(p, "--synthetic", "--data", "cracktrain")
     p.add_argument("--real", required=True, help="real folder, split by group into train / validation / test (train / validation with --real-test)")
     p.add_argument("--real-test", default=None, help="real test folder (default: the test side of --real's split)")
     p.add_argument("--arch", default="lraspp_mobilenet_v3_large")
-    p.add_argument("--max-steps", type=int, default=300, help="step budget of every row")
+    p.add_argument("--max-steps", type=int, default=300, help="step budget of every row (curve: of its pretraining)")
     p.add_argument("--batch-size", "-b", type=int, default=4)
     p.add_argument("--crop", type=int, default=192)
     p.add_argument("--lr", type=float, default=1e-3)
@@ -113,19 +116,31 @@ def add_sim2real_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", "-j", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--precise-bn", type=int, default=50, metavar="BATCHES",
-                   help="every row's final model gets its BatchNorm statistics recomputed on this many training "
+                   help="every final model gets its BatchNorm statistics recomputed on this many training "
                         "batches (0: none); the same for every row and both curve arms")
-    p.add_argument("--runs", default=None,
-                   help=f"comma list of {', '.join(BASE_RUNS + TARGET_RUNS)} "
-                        f"(default: the four base rows, plus {', '.join(DEFAULT_TARGET_RUNS)} with --target)")
     p.add_argument("--target", nargs="?", const="", default=None, metavar="FOLDER",
                    help="adapt synthetic RGB toward these unlabeled photos; no FOLDER: the real training split's images")
     p.add_argument("--adapt-band", default="0.005,0.05", help="Fourier band MIN,MAX (fraction of min(H, W))")
     p.add_argument("--adapt-prob", type=float, default=1.0, help="chance that a synthetic sample is adapted")
     p.add_argument("--finetune-lr", type=float, default=None,
-                   help="finetune row: learning rate of the fine-tune phase (default --lr)")
+                   help="fine-tuning: learning rate on the real photos (default --lr)")
     p.add_argument("--plain-pretrain", action="store_true",
-                   help="finetune row: pretrain on the renders as they are, even with --target (default: adapted)")
+                   help="fine-tuning: pretrain on the renders as they are, even with --target (default: adapted)")
+    p.add_argument("--pretrained", default=None, metavar="CKPT[,CKPT...]",
+                   help="finetune row: start from this synthetic checkpoint instead of pretraining (the row then "
+                        "spends all --max-steps on the real split); curve: one checkpoint per repeat, comma-separated")
+    p.add_argument("--real-root", default=DEFAULT_REAL_ROOT, help="where --cross looks for relative folders")
+    p.add_argument("--out", default=out)
+    p.add_argument("--device", default=None)
+    p.add_argument("--no-progress", action="store_true")
+    add_split_args(p, val_fraction=0.2, test_fraction=0.2)
+    add_data_args(p)
+
+
+def _add_rows_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--runs", default=None,
+                   help=f"comma list of {', '.join(BASE_RUNS + TARGET_RUNS)} "
+                        f"(default: the four base rows, plus {', '.join(DEFAULT_TARGET_RUNS)} with --target)")
     p.add_argument("--finetune-fraction", type=float, default=0.5,
                    help="finetune row: share of --max-steps spent on synthetic pretraining")
     p.add_argument("--self-train-steps", type=int, default=None,
@@ -134,22 +149,36 @@ def add_sim2real_args(p: argparse.ArgumentParser) -> None:
                    help="synthetic+pseudo row: share of the predicted crack pixels kept as labels (rest ignored)")
     p.add_argument("--pseudo-background-portion", type=float, default=None,
                    help="synthetic+pseudo row: share of the predicted background kept (default --pseudo-portion)")
-    p.add_argument("--curve", default=None, metavar="N,N,...", help="run the label-efficiency curve at these photo counts")
-    p.add_argument("--repeats", type=int, default=3, help="curve: repeats (different nested subsets and seeds)")
-    p.add_argument("--curve-steps", type=int, default=None, help="curve: steps per model on N photos (default --max-steps)")
-    p.add_argument("--pretrain-steps", type=int, default=None, help="curve: synthetic pretraining steps (default --max-steps)")
-    p.add_argument("--pretrained", default=None, metavar="CKPT[,CKPT...]",
-                   help="finetune row: start from this synthetic checkpoint instead of pretraining (the row then "
-                        "spends all --max-steps on the real split); curve: one checkpoint per repeat, comma-separated")
+
+
+def _add_curve_args(p: argparse.ArgumentParser, hidden: bool) -> None:
+    def h(text: str) -> str:
+        return argparse.SUPPRESS if hidden else text
+    p.add_argument("--repeats", type=int, default=3, help=h("repeats (different nested subsets and seeds)"))
+    p.add_argument("--curve-steps", type=int, default=None, help=h("steps per model on N photos (default --max-steps)"))
+    p.add_argument("--pretrain-steps", type=int, default=None,
+                   help=h("synthetic pretraining steps per repeat (default --max-steps)"))
     p.add_argument("--cross", action="append", default=None, metavar="NAME=FOLDER",
-                   help="curve: extra sets scored at each model's validation threshold (repeatable; default the three "
-                        "cross-domain sets under --real-root; 'none': no extra sets)")
-    p.add_argument("--real-root", default=DEFAULT_REAL_ROOT, help="where --cross looks for relative folders")
-    p.add_argument("--out", default="runs/sim2real")
-    p.add_argument("--device", default=None)
-    p.add_argument("--no-progress", action="store_true")
-    add_split_args(p, val_fraction=0.2, test_fraction=0.2)
-    add_data_args(p)
+                   help=h("extra sets scored at each model's validation threshold (repeatable; default the three "
+                          "cross-domain sets under --real-root; 'none': no extra sets)"))
+
+
+def add_sim2real_args(p: argparse.ArgumentParser) -> None:
+    add_experiment_args(p, out="runs/sim2real")
+    _add_rows_args(p)
+    # `sim2real --curve` is the old spelling of `cracktrain curve`: still accepted, with its options, for one release
+    p.add_argument("--curve", default=None, metavar="N,N,...", help=argparse.SUPPRESS)
+    _add_curve_args(p, hidden=True)
+
+
+def add_curve_args(p: argparse.ArgumentParser) -> None:
+    add_experiment_args(p, out="runs/curve")
+    p.add_argument("--sizes", dest="curve", default="0,10,30,60,120,180", metavar="N,N,...",
+                   help="labelled real photo counts N of the curve's points")
+    _add_curve_args(p, hidden=False)
+    # the sim2real rows' own settings at their defaults, so both commands share one code path
+    p.set_defaults(runs=None, finetune_fraction=0.5, self_train_steps=None, pseudo_portion=0.5,
+                   pseudo_background_portion=None)
 
 
 # ------------------------------------------------------------------ shared steps
@@ -260,7 +289,7 @@ def wanted_runs(args: argparse.Namespace) -> list[str]:
 
 
 def synthetic_is_folder(path: str | None) -> bool:
-    """``--synthetic`` names a folder of images/ + masks/ (another generator's output), not shards."""
+    """``--data`` names a folder of images/ + masks/ (another generator's output), not shards."""
     return bool(path) and "," not in str(path) and (Path(path) / "images").is_dir() \
         and not (Path(path) / "manifest.json").is_file()
 
@@ -269,13 +298,13 @@ def run_row(name: str, args: argparse.Namespace, out: Path, sets: RealSets,
             targets: tuple[str, ...] | None, device: torch.device) -> dict[str, Any]:
     """Train and score one row; a row that needs synthetic shards is skipped without them."""
     if name != "real" and not args.synthetic and not (name == "finetune" and args.pretrained):
-        return {"skipped": "no --synthetic shards given"}
+        return {"skipped": "no --data shards given"}
     stems = sets.train_stems
     if name == "real":
         return train_and_score(seg_args(args, out / name, None, args.real, stems), sets, args, device)
     if synthetic_is_folder(args.synthetic):
         if name != "synthetic":
-            raise TrainerInputError(f"--synthetic {args.synthetic} is an image folder: it trains the 'synthetic' row "
+            raise TrainerInputError(f"--data {args.synthetic} is an image folder: it trains the 'synthetic' row "
                                     f"only, not {name!r} (--runs synthetic,real)")
         ns = seg_args(args, out / name, None, args.synthetic, None, image_dir="images", mask_dir="masks",
                       mask_suffix="", real_depth_dir=None)
@@ -539,7 +568,7 @@ def score_point(ckpt: Path, sets: RealSets, cross: list[EvalSet], args: argparse
 def run_curve(args: argparse.Namespace) -> dict[str, Any]:
     """Real-only vs synthetic -> fine-tune on nested subsets of N labelled photos (see trainer.curve)."""
     if not args.synthetic and not args.pretrained:
-        raise TrainerInputError("--curve needs --synthetic shards (or --pretrained checkpoints) for the fine-tune arm")
+        raise TrainerInputError("the curve needs --data shards (or --pretrained checkpoints) for the fine-tune arm")
     if args.repeats < 1:
         raise TrainerInputError(f"--repeats must be >= 1, got {args.repeats}")
     sizes = parse_sizes(args.curve)

@@ -1,6 +1,6 @@
 """Micro-benchmarks of the numpy core: crack map, skeleton, skeleton diameters, crack measurement, surface mesh.
 
-Run ``python -m crackgen.tools.bench_core [--px 1024] [--grid 384] [--repeat 5]``; prints the
+Run ``crackgen bench --component core --component-args='--px 1024 --grid 384 --repeat 5'``; prints the
 median seconds per stage (after one warm-up call, so numba compilation is excluded).
 Speed is reported here, never asserted in tests.
 """

@@ -1,8 +1,8 @@
 """Material-map benchmark: seconds per ``material_maps`` call for each material family.
 
 Why a tool and not part of ``procedural.materials``: timing is not the library's
-job, and these figures only go into issue notes (``python -m
-crackgen.tools.bench_materials --px 1024``); nothing asserts them.
+job, and these figures only go into issue notes (``crackgen bench
+--component materials --component-args='--px 1024'``); nothing asserts them.
 """
 from __future__ import annotations
 

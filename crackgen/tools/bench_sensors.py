@@ -1,6 +1,6 @@
 """Sensor-stage benchmark on a real sample surface: BVH build, GT view, ToF, LiDAR, projection.
 
-Run: ``python -m crackgen.tools.bench_sensors [--samples N] [--json]``. Uses the default
+Run: ``crackgen bench --component sensors --component-args='--samples N --json'``. Uses the default
 recipe (512^2 RGB, ToF 320x240 with mixed pixels, 16-beam LiDAR, 384^2 grid) and
 the real crack map / material albedo, so the mixed-pixel count is realistic.
 Times are medians over samples, in milliseconds (wall, and ``_cpu``: process CPU

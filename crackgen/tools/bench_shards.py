@@ -1,7 +1,7 @@
 """Shard I/O benchmark: bytes per sample and write/read milliseconds per sample.
 
 Why a tool and not library code: these figures go into issue notes and docs/results
-tables (``python -m crackgen.tools.bench_shards --size 512``); nothing asserts them.
+tables (``crackgen bench --component shards --component-args='--size 512'``); nothing asserts them.
 ``synthetic_sample`` also serves tests that need a sample with every member
 without rendering one.
 """

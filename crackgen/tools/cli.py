@@ -11,9 +11,11 @@ import json
 import sys
 
 from crackgen import __version__
+from crackgen.cli_aliases import deprecated_alias
 
 EXIT_BAD_INPUT = 1
 EXIT_RUN_FAILED = 3
+BENCH_COMPONENTS = ("core", "materials", "sensors", "shards")
 SET_HELP = "change a recipe field, e.g. crack.shape=fbm or camera.distance_m='{ min = 0.6, max = 1.2 }' (repeatable)"
 
 
@@ -105,10 +107,31 @@ def _cmd_bench_sweep(args: argparse.Namespace, recipe) -> int:
     return 0
 
 
+def _cmd_bench_component(args: argparse.Namespace) -> int:
+    import importlib
+    import shlex
+
+    if args.recipe is not None:
+        return _err(f"bench: give a recipe or --component, not both (got {args.recipe} and {args.component})")
+    try:
+        argv = shlex.split(args.component_args)
+    except ValueError as exc:
+        return _err(f"bench: --component-args: {exc}")
+    try:
+        rc = importlib.import_module(f"crackgen.tools.bench_{args.component}").main(argv)
+    except SystemExit as exc:  # its own parser refused the arguments (it printed why)
+        return EXIT_BAD_INPUT if exc.code else 0
+    return rc or 0
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
     from crackgen.datagen.heap import HeapSettingError, mmap_threshold_from_env
     from crackgen.tools.bench import bench, format_table
 
+    if args.component:
+        return _cmd_bench_component(args)
+    if args.recipe is None:
+        return _err("bench: give a RECIPE (or --component NAME)")
     recipe = _load(args.recipe)
     if recipe is None:
         return EXIT_BAD_INPUT
@@ -249,8 +272,13 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--limit", type=int, default=None, help="at most this many samples")
     i.set_defaults(func=_cmd_inspect)
 
-    b = sub.add_parser("bench", help="per-stage timing table of the sample pipeline")
-    b.add_argument("recipe")
+    b = sub.add_parser("bench", help="per-stage timing table of the sample pipeline, or of one component")
+    b.add_argument("recipe", nargs="?", default=None)
+    b.add_argument("--component", choices=BENCH_COMPONENTS, default=None,
+                   help="time one component alone instead of a recipe: the numpy core (crack map, skeleton, "
+                        "measurement, mesh), material maps, sensors or shard I/O")
+    b.add_argument("--component-args", default="", metavar="'ARGS'",
+                   help="options of that component's benchmark, e.g. --component core --component-args='--px 512' (write = before a value that starts with -)")
     b.add_argument("--samples", type=int, default=5, help="timed samples (after one warm-up sample)")
     b.add_argument("--threads", type=int, default=0,
                    help="Cycles threads (0 = recipe value, else all cores; with --sweep: per worker, 0 = cores / workers)")
@@ -309,7 +337,8 @@ def build_parser() -> argparse.ArgumentParser:
                                       "of shards or an images/ + masks/ folder")
     st.add_argument("path", metavar="DIR|FOLDER", nargs="+",
                     help="a crackgen dataset, or a folder with images/ and masks/; several: one table side by side")
-    st.add_argument("--json", default=None, metavar="OUT", help="also write the statistics as JSON")
+    st.add_argument("--json-out", dest="json", default=None, metavar="OUT", help="also write the statistics as JSON")
+    deprecated_alias(st, "--json", "--json-out", "crackgen")
     st.add_argument("--limit", type=int, default=None, help="at most this many images")
     st.add_argument("--no-progress", action="store_true", help="no progress bar")
     st.set_defaults(func=_cmd_stats)
@@ -317,7 +346,9 @@ def build_parser() -> argparse.ArgumentParser:
     mc = sub.add_parser("measure-check", help="crack length/width measured from each rendered mask + depth + K "
                                               "against the sample's 'visible' GT: median and p90 relative error")
     mc.add_argument("path", metavar="DIR", help="a crackgen dataset (e.g. made from recipes/measure.toml)")
-    mc.add_argument("--json", default=None, metavar="OUT", help="also write per-sample figures and the summary as JSON")
+    mc.add_argument("--json-out", dest="json", default=None, metavar="OUT",
+                    help="also write per-sample figures and the summary as JSON")
+    deprecated_alias(mc, "--json", "--json-out", "crackgen")
     mc.add_argument("--limit", type=int, default=None, help="at most this many samples")
     mc.add_argument("--no-progress", action="store_true", help="no progress bar")
     mc.set_defaults(func=_cmd_measure_check)

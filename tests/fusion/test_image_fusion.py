@@ -59,7 +59,7 @@ def _scene(n=128):
 
 
 def _q(x):
-    return np.round(255 * x)  # 8-bit, as written and read by ``cracktrain fuse-images``
+    return np.round(255 * x)  # 8-bit, as written and read by ``cracktrain merge-stack``
 
 
 def test_fusing_two_half_focused_copies_beats_either_input():

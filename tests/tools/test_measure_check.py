@@ -33,7 +33,7 @@ def test_measure_check_reports_errors(tmp_path, capsys):
         w.add(sample_key(0, 1), _sample(72, 4, _gt(0.355 / 1.1, 0.02)))
         w.add(sample_key(0, 2), _sample(72, 4, {"texels": 0, "components": []}))  # nothing in view: skipped
     out = tmp_path / "check.json"
-    assert main(["measure-check", str(root), "--json", str(out), "--no-progress"]) == 0
+    assert main(["measure-check", str(root), "--json-out", str(out), "--no-progress"]) == 0
     text = capsys.readouterr().out
     assert "2 samples checked (1 without a visible crack skipped)" in text
     res = json.loads(out.read_text())

@@ -106,7 +106,7 @@ def test_folder_form(tmp_path, capsys):
         cv2.imwrite(str(root / "masks" / f"{i:03d}.png"), m)
     check(compute_stats(root, progress=False))
     out = tmp_path / "s.json"
-    assert main(["stats", str(root), "--json", str(out), "--no-progress"]) == 0
+    assert main(["stats", str(root), "--json-out", str(out), "--no-progress"]) == 0
     text = capsys.readouterr().out
     assert "crack width (px)" in text and "crack-free images: 20.0 % (1 of 5)" in text and f"wrote {out}" in text
     check(json.loads(out.read_text()))
@@ -117,7 +117,7 @@ def test_folder_form(tmp_path, capsys):
     (other / "masks").mkdir()
     cv2.imwrite(str(other / "images" / "x.png"), grey(90))
     cv2.imwrite(str(other / "masks" / "x.png"), line(3))
-    assert main(["stats", str(root), str(other), "--json", str(out), "--no-progress"]) == 0
+    assert main(["stats", str(root), str(other), "--json-out", str(out), "--no-progress"]) == 0
     text = capsys.readouterr().out
     assert "real (5)" in text and "other (1)" in text
     width_row = next(t for t in text.splitlines() if t.startswith("crack width (px)")).split()

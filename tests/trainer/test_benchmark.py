@@ -98,7 +98,7 @@ def test_a_folder_with_mismatched_names_is_refused_in_one_line(tmp_path, capsys)
         parse_set(f"bad={bad}", _set_args())
     good = write_folder(tmp_path / "good", {"a": GREY}, {"a": LABEL})
     assert main(["benchmark", str(tmp_path / "nope.pt"), "--set", f"bad={bad}", "--set", f"good={good}",
-                 "--out", str(tmp_path / "o"), "--no-progress"]) == 2
+                 "--out", str(tmp_path / "o"), "--no-progress"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bad" in err[0] and "without a mask" in err[0]
     assert not (tmp_path / "o").exists()  # refused before anything was written
@@ -143,7 +143,7 @@ def test_a_model_is_refused_on_photos_of_groups_it_trained_on(tiny, tmp_path, ca
         (part / sub).mkdir(parents=True)
         (part / sub / "003.png").symlink_to(tiny["real"] / sub / "003.png")
     assert main(["benchmark", str(tiny["ckpt"]), "--set", f"part={part}", "--val", "none",
-                 "--out", str(tmp_path / "o"), "--no-progress"]) == 2
+                 "--out", str(tmp_path / "o"), "--no-progress"]) == 1
     assert "trained on photos of 1 group(s) of set part (003)" in capsys.readouterr().err
 
 

@@ -19,7 +19,7 @@ def test_subsets_nested_seeded_and_disjoint_from_test():
     assert nested_subsets(train, sizes, 0, 1) == subs[1]  # and are reproducible
     with pytest.raises(TrainerInputError, match="training split has 240"):
         nested_subsets(train, [241], 0, 0)
-    with pytest.raises(TrainerInputError, match="--curve"):
+    with pytest.raises(TrainerInputError, match="--sizes"):
         parse_sizes("10,x")
 
 
@@ -59,11 +59,11 @@ def test_csv_round_trip_keeps_every_field(tmp_path):
 def test_curve_continues_only_with_the_same_settings(tmp_path):
     import argparse
 
-    from trainer.sim2real import add_sim2real_args, check_curve_settings
+    from trainer.sim2real import add_curve_args, check_curve_settings
 
     p = argparse.ArgumentParser()
-    add_sim2real_args(p)
-    args = p.parse_args(["--synthetic", "s", "--real", "r", "--curve", "0,10", "--curve-steps", "100"])
+    add_curve_args(p)
+    args = p.parse_args(["--data", "s", "--real", "r", "--sizes", "0,10", "--curve-steps", "100"])
     check_curve_settings(args, tmp_path, None)  # first run records them
     check_curve_settings(args, tmp_path, None)  # the same settings continue
     args.curve, args.repeats = "0,10,30", 5  # more sizes and repeats extend the same curve

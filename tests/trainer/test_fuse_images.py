@@ -1,4 +1,4 @@
-"""`cracktrain fuse-images`: writes the fused image, prints the four scores, one-line errors."""
+"""`cracktrain merge-stack`: writes the fused image, prints the four scores, one-line errors."""
 import cv2
 import numpy as np
 
@@ -21,7 +21,7 @@ def _pair(tmp_path):
 def test_fuse_images_writes_and_scores(tmp_path, capsys):
     pa, pb = _pair(tmp_path)
     out = tmp_path / "f" / "fused.png"
-    assert main(["fuse-images", str(pa), str(pb), "--out", str(out), "--levels", "2"]) == 0
+    assert main(["merge-stack", str(pa), str(pb), "--out", str(out), "--levels", "2"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
     assert lines[0].startswith("Q_Y ") and "Q_MI" in lines[0] and str(out) in lines[-1]
     fused = cv2.imread(str(out))
@@ -35,6 +35,6 @@ def test_fuse_images_bad_inputs(tmp_path, capsys):
     for argv, needle in (([str(pa), str(tmp_path / "missing.png")], "does not exist"),
                          ([str(pa), str(small)], "sizes must match"),
                          ([str(pa)], "at least 2")):
-        rc = main(["fuse-images", *argv, "--out", str(tmp_path / "x.png")])
+        rc = main(["merge-stack", *argv, "--out", str(tmp_path / "x.png")])
         err = capsys.readouterr().err.strip().splitlines()
-        assert rc == 2 and len(err) == 1 and needle in err[0], (argv, err)
+        assert rc == 1 and len(err) == 1 and needle in err[0], (argv, err)

@@ -61,7 +61,7 @@ def test_targets_follow_the_corrupted_map():
 def test_bad_options_are_a_one_line_error_before_anything_is_written(tmp_path, capsys, extra, message):
     with pytest.raises(ValueError, match="probability"):
         corrupt_stereo(_patch(), np.random.default_rng(0), 1.5)
-    rc = cli_main(["fusion", "--data", str(tmp_path), *extra, "--steps", "1", "--out", str(tmp_path / "r"), "--no-progress"])
+    rc = cli_main(["fusion", "--data", str(tmp_path), *extra, "--max-steps", "1", "--out", str(tmp_path / "r"), "--no-progress"])
     err = capsys.readouterr().err.strip()
-    assert rc == 2 and message in err and len(err.splitlines()) == 1
+    assert rc == 1 and message in err and len(err.splitlines()) == 1
     assert not (tmp_path / "r").exists()

@@ -80,9 +80,9 @@ def _args(parser_args: list[str]) -> argparse.Namespace:
 def test_a_few_training_steps_reduce_the_loss_then_eval_and_fuse(fusion_shards, tmp_path, capsys):
     torch.set_num_threads(1)
     out = tmp_path / "run"
-    common = ["--data", str(fusion_shards), "--val-fraction", "0.34", "--patch", "24", "-b", "4",
+    common = ["--data", str(fusion_shards), "--val-fraction", "0.34", "--crop", "24", "-b", "4",
               "--optimizer", "adam", "--lr", "0.003", "--no-progress", "--out", str(out)]
-    args = _args(["fusion", *common, "--steps", "12"])
+    args = _args(["fusion", *common, "--max-steps", "12"])
     scenes = load_shard_scenes(fusion_shards, "tof", progress=False)
     from trainer.fusion_data import channel_stats
 
@@ -90,7 +90,7 @@ def test_a_few_training_steps_reduce_the_loss_then_eval_and_fuse(fusion_shards, 
     x, t = make_batch(scenes, args, 10_000, mean, std)  # a fixed batch no training step draws
     torch.manual_seed(args.seed)
     before = masked_mse(ConfidenceCNN(4)(x), t).item()
-    assert cli_main(["fusion", *common, "--steps", "12"]) == 0
+    assert cli_main(["fusion", *common, "--max-steps", "12"]) == 0
     ckpt = torch.load(out / "last.pt", weights_only=False)
     model = ConfidenceCNN(4)
     model.load_state_dict(ckpt["model"])
@@ -101,7 +101,7 @@ def test_a_few_training_steps_reduce_the_loss_then_eval_and_fuse(fusion_shards, 
     assert len(ckpt["val_keys"]) == 2 and not set(ckpt["val_keys"]) & set(ckpt["train_keys"])
     assert "trained 12 steps" in capsys.readouterr().out
 
-    assert cli_main(["fusion-eval", "--ckpt", str(out / "last.pt"), "--no-progress", "--out", str(tmp_path / "ev")]) == 0
+    assert cli_main(["fusion-eval", "--checkpoint", str(out / "last.pt"), "--no-progress", "--out", str(tmp_path / "ev")]) == 0
     table = capsys.readouterr().out
     for row in ("| stereo |", "| ToF |", "| fused, max |", "| fused, weighted |", "| fused, max + BM3D after |", "| ToF + BM3D after |"):
         assert row in table
@@ -118,11 +118,11 @@ def test_a_few_training_steps_reduce_the_loss_then_eval_and_fuse(fusion_shards, 
     for name, member in (("left", "rgb.png"), ("right", "right.png")):
         files[name] = tmp_path / f"{name}.png"
         cv2.imwrite(str(files[name]), smp[member])
-    argv = ["fuse", "--ckpt", str(out / "last.pt"), "--out", str(tmp_path / "fused")]
+    argv = ["fuse", "--checkpoint", str(out / "last.pt"), "--out", str(tmp_path / "fused")]
     argv += [a for k, p in files.items() for a in (f"--{k}", str(p))]
     assert cli_main(argv) == 0
     assert (tmp_path / "fused" / "fused_max.exr").is_file() and "| fused_max |" in capsys.readouterr().out
-    assert cli_main([str(tmp_path / "nope.npy") if a == str(files["gt"]) else a for a in argv]) == 2
+    assert cli_main([str(tmp_path / "nope.npy") if a == str(files["gt"]) else a for a in argv]) == 1
     assert "nope.npy" in capsys.readouterr().err
 
 
@@ -148,11 +148,11 @@ def test_median_disparity_reference_makes_the_input_shift_free(fusion_shards, tm
 
     out = tmp_path / "run"
     assert cli_main(["fusion", "--data", str(fusion_shards), "--variant", "lidar", "--disp-ref", "median",
-                     "--patch", "16", "-b", "2", "--steps", "2", "--no-progress", "--out", str(out)]) == 0
+                     "--crop", "16", "-b", "2", "--max-steps", "2", "--no-progress", "--out", str(out)]) == 0
     ckpt = torch.load(out / "last.pt", weights_only=False)
     assert ckpt["sample_config"]["disp_ref"] == "median"
-    assert cli_main(["fusion", "--data", str(fusion_shards), "--variant", "lidar", "--patch", "16", "-b", "2",
-                     "--steps", "3", "--no-progress", "--out", str(out), "--resume", str(out / "last.pt")]) == 2
+    assert cli_main(["fusion", "--data", str(fusion_shards), "--variant", "lidar", "--crop", "16", "-b", "2",
+                     "--max-steps", "3", "--no-progress", "--out", str(out), "--resume", str(out / "last.pt")]) == 1
     assert "disp_ref differ" in capsys.readouterr().err  # resuming without the option is refused
 
 
@@ -241,9 +241,9 @@ def test_lidar_resample_adds_scenes_with_a_redrawn_lidar_and_the_same_stereo(fus
     assert all(np.array_equal(a.x, b.x) for a, b in zip(more, again))
     out = tmp_path / "run"
     assert cli_main(["fusion", "--data", str(fusion_shards), "--variant", "lidar", "--lidar-resample", "2",
-                     "--patch", "16", "-b", "2", "--steps", "2", "--no-progress", "--out", str(out)]) == 0
-    assert cli_main(["fusion", "--data", str(fusion_shards), "--lidar-resample", "2", "--steps", "1",
-                     "--no-progress", "--out", str(tmp_path / "tof")]) == 2
+                     "--crop", "16", "-b", "2", "--max-steps", "2", "--no-progress", "--out", str(out)]) == 0
+    assert cli_main(["fusion", "--data", str(fusion_shards), "--lidar-resample", "2", "--max-steps", "1",
+                     "--no-progress", "--out", str(tmp_path / "tof")]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--lidar-resample" in err[0] and not (tmp_path / "tof" / "last.pt").exists()
 
@@ -269,11 +269,11 @@ def test_occluders_add_composited_scenes_with_a_nearer_layer_and_exact_gt(fusion
     assert all(a.key == b.key and np.array_equal(a.x, b.x) for a, b in zip(more, again))
     out = tmp_path / "run"
     assert cli_main(["fusion", "--data", str(fusion_shards), "--variant", "lidar", "--occluders", "1",
-                     "--patch", "16", "-b", "2", "--steps", "2", "--no-progress", "--out", str(out)]) == 0
-    assert cli_main(["fusion", "--data", str(fusion_shards), "--variant", "lidar", "--occluders", "2", "--steps", "3",
-                     "--resume", str(out / "last.pt"), "--no-progress", "--out", str(out)]) == 2
-    assert cli_main(["fusion", "--data", str(fusion_shards), "--occluders", "1", "--steps", "1",
-                     "--no-progress", "--out", str(tmp_path / "tof")]) == 2
+                     "--crop", "16", "-b", "2", "--max-steps", "2", "--no-progress", "--out", str(out)]) == 0
+    assert cli_main(["fusion", "--data", str(fusion_shards), "--variant", "lidar", "--occluders", "2", "--max-steps", "3",
+                     "--resume", str(out / "last.pt"), "--no-progress", "--out", str(out)]) == 1
+    assert cli_main(["fusion", "--data", str(fusion_shards), "--occluders", "1", "--max-steps", "1",
+                     "--no-progress", "--out", str(tmp_path / "tof")]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and "occluders differ" in err[0] and "--occluders" in err[1]
     assert not (tmp_path / "tof").exists()

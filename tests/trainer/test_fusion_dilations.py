@@ -31,8 +31,8 @@ def test_an_impulse_reaches_exactly_the_receptive_field(dilations, side):
 def test_a_wide_checkpoint_rebuilds_the_wide_network(tmp_path):
     data = write_fusion_shards(tmp_path / "shards", 5)
     out = tmp_path / "run"
-    assert cli_main(["fusion", "--data", str(data), "--variant", "lidar", "--dilations", "wide", "--patch", "24",
-                     "-b", "2", "--steps", "2", "--val-fraction", "0.4", "--no-progress", "--out", str(out)]) == 0
+    assert cli_main(["fusion", "--data", str(data), "--variant", "lidar", "--dilations", "wide", "--crop", "24",
+                     "-b", "2", "--max-steps", "2", "--val-fraction", "0.4", "--no-progress", "--out", str(out)]) == 0
     model, cfg, _ = load_fusion_model(out / "last.pt", torch.device("cpu"))
     assert model.dilations == WIDE and cfg["receptive_field_px"] == 43
-    assert cli_main(["fusion-eval", "--ckpt", str(out / "last.pt"), "--no-progress", "--out", str(tmp_path / "ev")]) == 0
+    assert cli_main(["fusion-eval", "--checkpoint", str(out / "last.pt"), "--no-progress", "--out", str(tmp_path / "ev")]) == 0

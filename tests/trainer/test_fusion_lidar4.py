@@ -86,11 +86,11 @@ def test_lidar4_trains_with_stereo_failures_and_evaluates(lidar_shards, tmp_path
                              if s.key.startswith(scenes[0].key))  # the stereo difference is the sample's own
     out = tmp_path / "run"
     assert cli_main(["fusion", "--data", str(lidar_shards), "--variant", "lidar4", "--stereo-failures", "0.5",
-                     "--patch", "24", "-b", "4", "--steps", "3", "--val-fraction", "0.34", "--no-progress",
+                     "--crop", "24", "-b", "4", "--max-steps", "3", "--val-fraction", "0.34", "--no-progress",
                      "--out", str(out)]) == 0
     ckpt = torch.load(out / "last.pt", weights_only=False)
     assert ckpt["sample_config"]["in_channels"] == 4
     assert ckpt["sample_config"]["channels"][-1] == "lr_diff_stereo"
     capsys.readouterr()
-    assert cli_main(["fusion-eval", "--ckpt", str(out / "last.pt"), "--no-progress", "--out", str(tmp_path / "ev")]) == 0
+    assert cli_main(["fusion-eval", "--checkpoint", str(out / "last.pt"), "--no-progress", "--out", str(tmp_path / "ev")]) == 0
     assert "| LiDAR |" in (tmp_path / "ev" / "table.md").read_text()

@@ -62,12 +62,12 @@ def shards(tmp_path_factory):
 
 def test_the_checkpoint_carries_the_filter_and_fusion_eval_rebuilds_the_filtered_input(shards, tmp_path, capsys):
     out = tmp_path / "run"
-    assert cli_main(["fusion", "--data", str(shards), "--variant", "lidar", "--other-bm3d", "0.4", "--patch", "24",
-                     "-b", "4", "--steps", "2", "--val-fraction", "0.34", "--no-progress", "--out", str(out)]) == 0
+    assert cli_main(["fusion", "--data", str(shards), "--variant", "lidar", "--other-bm3d", "0.4", "--crop", "24",
+                     "-b", "4", "--max-steps", "2", "--val-fraction", "0.34", "--no-progress", "--out", str(out)]) == 0
     ckpt = torch.load(out / "last.pt", weights_only=False)
     assert ckpt["sample_config"]["other_bm3d"] == 0.4
     capsys.readouterr()
-    assert cli_main(["fusion-eval", "--ckpt", str(out / "last.pt"), "--no-progress", "--out", str(tmp_path / "ev")]) == 0
+    assert cli_main(["fusion-eval", "--checkpoint", str(out / "last.pt"), "--no-progress", "--out", str(tmp_path / "ev")]) == 0
     per_scene = json.loads((tmp_path / "ev" / "metrics.json").read_text())["per_scene"]
     scenes = load_shard_scenes(shards, "lidar", keys=ckpt["val_keys"], progress=False, other_bm3d=0.4)
     raw = load_shard_scenes(shards, "lidar", keys=ckpt["val_keys"], progress=False)
@@ -76,7 +76,7 @@ def test_the_checkpoint_carries_the_filter_and_fusion_eval_rebuilds_the_filtered
         assert not np.allclose(s.x[..., 1], r.x[..., 1], atol=1e-2)  # the filter did something
     p = argparse.ArgumentParser()
     add_fusion_args(p)
-    resume = p.parse_args(["--data", str(shards), "--variant", "lidar", "--resume", str(out / "last.pt"), "--steps", "3",
-                           "--patch", "24", "-b", "4", "--val-fraction", "0.34", "--no-progress", "--out", str(out)])
+    resume = p.parse_args(["--data", str(shards), "--variant", "lidar", "--resume", str(out / "last.pt"), "--max-steps", "3",
+                           "--crop", "24", "-b", "4", "--val-fraction", "0.34", "--no-progress", "--out", str(out)])
     with pytest.raises(TrainerInputError, match="other_bm3d"):  # a resume must not change the inputs
         fusion_main(resume)

@@ -134,7 +134,7 @@ def test_pseudo_folder_is_a_real_folder_whose_labels_partition_the_pixels(teache
 def test_cli_pseudo_label_then_train_on_it(teacher, tmp_path, capsys):
     _site(tmp_path / "site")
     out = tmp_path / "labels"
-    assert main(["pseudo-label", str(teacher["ckpt"]), "--target", str(tmp_path / "site"), "--out", str(out),
+    assert main(["pseudo-label", "-c", str(teacher["ckpt"]), "--target", str(tmp_path / "site"), "--out", str(out),
                  "--batches", "2", "-b", "2", "-j", "0", "--no-progress"]) == 0
     said = capsys.readouterr().out
     assert "pseudo-labelled 4 photos" in said and str(out) in said
@@ -142,8 +142,8 @@ def test_cli_pseudo_label_then_train_on_it(teacher, tmp_path, capsys):
     assert main(["seg", "--real", str(out), "--init", str(teacher["ckpt"]), "--arch", "unet", "-b", "2", "--crop",
                  "32", "-j", "0", "--no-progress", "--max-steps", "2", "--out", str(run)]) == 0
     assert load_checkpoint(run / "checkpoint.pt")["step"] == 2
-    assert main(["pseudo-label", str(teacher["ckpt"]), "--target", str(tmp_path / "site"), "--out", str(out),
-                 "--portion", "1.5"]) == 2
+    assert main(["pseudo-label", "-c", str(teacher["ckpt"]), "--target", str(tmp_path / "site"), "--out", str(out),
+                 "--portion", "1.5"]) == 1
     err = capsys.readouterr().err.strip()
     assert "--portion" in err and len(err.splitlines()) == 1
 
@@ -151,7 +151,7 @@ def test_cli_pseudo_label_then_train_on_it(teacher, tmp_path, capsys):
 def test_sim2real_pseudo_row_starts_from_the_synthetic_model(teacher, tmp_path):
     shards = write_shards(tmp_path / "shards", per_shard=4)
     out = tmp_path / "s2r"
-    assert main(["sim2real", "--synthetic", str(shards), "--real", str(teacher["real"]), "--test-fraction",
+    assert main(["sim2real", "--data", str(shards), "--real", str(teacher["real"]), "--test-fraction",
                  "0.25", "--target", "--max-steps", "2", "--self-train-steps", "3", "--runs", "synthetic+pseudo",
                  "--arch", "unet", "-b", "2", "--crop", "32", "-j", "0", "--no-progress", "--out", str(out)]) == 0
     table = json.loads((out / "sim2real.json").read_text())

@@ -46,7 +46,7 @@ def test_mask_member_picks_the_label(shards):
 def test_missing_mask_member_is_a_one_line_error_naming_shard_and_member(shards, tmp_path, capsys):
     with pytest.raises(TrainerInputError, match=r"shard-000000\.tar.*mask_visible\.png"):
         ShardSource(shards, "none", mask_member="mask_visible.png")
-    assert _seg(shards, tmp_path / "run", "--mask-member", "mask_visible.png") == 2
+    assert _seg(shards, tmp_path / "run", "--mask-member", "mask_visible.png") == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "shard-000000.tar" in err[0] and "mask_visible.png" in err[0]
 
@@ -115,6 +115,6 @@ def test_a_comma_list_trains_several_datasets_together(shards, tmp_path, capsys)
     assert all(np.array_equal(a, b) for a, b in zip(masks[8:], alone))  # same keys, other dataset: both kept
     with pytest.raises(TrainerInputError, match="same shard twice"):
         ShardSource(f"{shards},{shards}", "none")
-    assert _seg(shards, tmp_path / "run", "--data", f"{shards},{tmp_path / 'missing'}") == 2
+    assert _seg(shards, tmp_path / "run", "--data", f"{shards},{tmp_path / 'missing'}") == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "missing" in err[0]

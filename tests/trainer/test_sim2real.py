@@ -26,7 +26,7 @@ COMMON = ["--arch", "unet", "--batch-size", "2", "--crop", "32", "--workers", "0
 
 def test_rows_with_adaptation_and_finetune(data, tmp_path, capsys):
     out = tmp_path / "s2r"
-    rc = main(["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]),
+    rc = main(["sim2real", "--data", str(data["shards"]), "--real", str(data["real"]),
                "--test-fraction", "0.25", "--target", "--max-steps", "4",
                "--runs", "synthetic,synthetic+fourier,synthetic+adapt,real,finetune", "--out", str(out), *COMMON])
     assert rc == 0
@@ -48,18 +48,18 @@ def test_rows_with_adaptation_and_finetune(data, tmp_path, capsys):
 
 
 def test_adaptation_rows_need_a_target(data, tmp_path, capsys):
-    rc = main(["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]),
+    rc = main(["sim2real", "--data", str(data["shards"]), "--real", str(data["real"]),
                "--test-fraction", "0.25", "--runs", "synthetic+fourier", "--out", str(tmp_path), *COMMON])
-    assert rc == 2 and "needs --target" in capsys.readouterr().err
-    rc = main(["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]),
+    assert rc == 1 and "needs --target" in capsys.readouterr().err
+    rc = main(["sim2real", "--data", str(data["shards"]), "--real", str(data["real"]),
                "--test-fraction", "0.25", "--target", str(tmp_path / "nope"), "--out", str(tmp_path), *COMMON])
-    assert rc == 2 and "no such folder" in capsys.readouterr().err
+    assert rc == 1 and "no such folder" in capsys.readouterr().err
 
 
 def test_curve_writes_csv_plot_and_headline(data, tmp_path):
     out = tmp_path / "c"
-    rc = main(["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]),
-               "--test-fraction", "0.25", "--curve", "0,2,4", "--repeats", "2", "--curve-steps", "2",
+    rc = main(["curve", "--data", str(data["shards"]), "--real", str(data["real"]),
+               "--test-fraction", "0.25", "--sizes", "0,2,4", "--repeats", "2", "--curve-steps", "2",
                "--pretrain-steps", "2", "--cross", f"walls={write_real_folder(tmp_path / 'walls', n=3)}", "--out", str(out), *COMMON])
     assert rc == 0
     rows = list(csv.DictReader(open(out / "curve" / "curve.csv")))
@@ -91,7 +91,7 @@ def test_init_loads_weights_and_refuses_another_arch(data, tmp_path, capsys):
     b = load_checkpoint(tmp_path / "b/checkpoint.pt")["model"]
     assert all(torch.equal(a[k], b[k]) for k in a if a[k].dtype.is_floating_point and "running" not in k)
     assert main([*base, "--arch", "lraspp_mobilenet_v3_large", "--init", str(tmp_path / "a/checkpoint.pt"),
-                 "--out", str(tmp_path / "c")]) == 2
+                 "--out", str(tmp_path / "c")]) == 1
     assert "checkpoint is a unet" in capsys.readouterr().err
 
 
@@ -117,7 +117,7 @@ def test_stream_adapts_synthetic_rgb_only(data):
 
 def test_lr_scheduler_reaches_every_row_and_a_curve_refuses_another(data, tmp_path):
     out = tmp_path / "s"
-    assert main(["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]),
+    assert main(["sim2real", "--data", str(data["shards"]), "--real", str(data["real"]),
                  "--test-fraction", "0.25", "--max-steps", "2", "--lr-scheduler", "cosine",
                  "--runs", "synthetic,finetune", "--out", str(out), *COMMON]) == 0
     for row in ("synthetic", "finetune_pretrain", "finetune"):
@@ -125,17 +125,17 @@ def test_lr_scheduler_reaches_every_row_and_a_curve_refuses_another(data, tmp_pa
         assert ckpt["args"]["lr_scheduler"] == "cosine"
         assert ckpt["optimizer"]["param_groups"][0]["lr"] < 1e-3  # annealed, not the constant 1e-3
     # a curve continues with the same settings and refuses another schedule
-    curve = ["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]), "--test-fraction",
-             "0.25", "--curve", "0,2", "--repeats", "1", "--curve-steps", "1", "--pretrain-steps", "1",
+    curve = ["curve", "--data", str(data["shards"]), "--real", str(data["real"]), "--test-fraction",
+             "0.25", "--sizes", "0,2", "--repeats", "1", "--curve-steps", "1", "--pretrain-steps", "1",
              "--cross", "none", "--out", str(tmp_path / "c"), *COMMON]
     assert main(curve) == 0
     assert main(curve) == 0
-    assert main([*curve, "--lr-scheduler", "poly"]) == 2
+    assert main([*curve, "--lr-scheduler", "poly"]) == 1
 
 
 def test_finetune_lr_and_plain_pretraining(data, tmp_path, capsys):
     out = tmp_path / "f"
-    assert main(["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]),
+    assert main(["sim2real", "--data", str(data["shards"]), "--real", str(data["real"]),
                  "--test-fraction", "0.25", "--target", "--max-steps", "4", "--runs", "finetune",
                  "--finetune-lr", "3e-4", "--plain-pretrain", "--out", str(out), *COMMON]) == 0
     ft = json.loads((out / "sim2real.json").read_text())["runs"]["finetune"]
@@ -143,15 +143,15 @@ def test_finetune_lr_and_plain_pretraining(data, tmp_path, capsys):
     assert load_checkpoint(out / "finetune_pretrain" / "checkpoint.pt")["args"]["lr"] == 1e-3
     assert load_checkpoint(out / "finetune" / "checkpoint.pt")["args"]["lr"] == 3e-4
     assert load_checkpoint(out / "finetune_pretrain" / "checkpoint.pt")["args"]["adapt_targets"] is None
-    assert main(["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]),
+    assert main(["sim2real", "--data", str(data["shards"]), "--real", str(data["real"]),
                  "--test-fraction", "0.25", "--runs", "finetune", "--finetune-lr", "0",
-                 "--out", str(out), *COMMON]) == 2
+                 "--out", str(out), *COMMON]) == 1
     assert "--finetune-lr must be > 0" in capsys.readouterr().err
 
 
 def test_finetune_row_from_a_pretrained_synthetic_model_spends_every_step_on_real(data, tmp_path, capsys):
     syn = tmp_path / "syn"
-    assert main(["sim2real", "--synthetic", str(data["shards"]), "--real", str(data["real"]),
+    assert main(["sim2real", "--data", str(data["shards"]), "--real", str(data["real"]),
                  "--test-fraction", "0.25", "--max-steps", "2", "--runs", "synthetic", "--out", str(syn), *COMMON]) == 0
     pre = syn / "synthetic" / "checkpoint.pt"
     out = tmp_path / "ft"
@@ -163,7 +163,7 @@ def test_finetune_row_from_a_pretrained_synthetic_model_spends_every_step_on_rea
     assert ckpt["step"] == 3 and ckpt["args"]["init"] == str(pre) and ckpt["args"]["data"] is None
     assert not (out / "finetune_pretrain").exists()
     assert main(["sim2real", "--pretrained", str(tmp_path / "nope.pt"), "--real", str(data["real"]),
-                 "--test-fraction", "0.25", "--max-steps", "3", "--runs", "finetune", "--out", str(out), *COMMON]) == 2
+                 "--test-fraction", "0.25", "--max-steps", "3", "--runs", "finetune", "--out", str(out), *COMMON]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "nope.pt" in err[0]
     assert json.loads((out / "sim2real.json").read_text())["runs"]["finetune"] == ft  # the finished row is kept
@@ -174,12 +174,12 @@ def test_a_second_run_adds_rows_and_keeps_the_earlier_ones(data, tmp_path):
     base = ["sim2real", "--real", str(data["real"]), "--test-fraction", "0.25", "--out", str(out), *COMMON]
     assert main([*base, "--max-steps", "2", "--runs", "real"]) == 0
     first = json.loads((out / "sim2real.json").read_text())["runs"]["real"]
-    assert main([*base, "--max-steps", "2", "--synthetic", str(data["shards"]), "--runs", "synthetic"]) == 0
+    assert main([*base, "--max-steps", "2", "--data", str(data["shards"]), "--runs", "synthetic"]) == 0
     assert json.loads((out / "sim2real.json").read_text())["runs"] == {"real": first} | {
         "synthetic": json.loads((out / "sim2real.json").read_text())["runs"]["synthetic"]}
     assert "| real |" in (out / "sim2real.md").read_text()
     # other settings (budget): the earlier rows are not comparable and are replaced
-    assert main([*base, "--max-steps", "3", "--synthetic", str(data["shards"]), "--runs", "synthetic"]) == 0
+    assert main([*base, "--max-steps", "3", "--data", str(data["shards"]), "--runs", "synthetic"]) == 0
     assert list(json.loads((out / "sim2real.json").read_text())["runs"]) == ["synthetic"]
     assert main([*base, "--max-steps", "3", "--lr-scheduler", "cosine", "--runs", "real"]) == 0  # other schedule
     assert list(json.loads((out / "sim2real.json").read_text())["runs"]) == ["real"]
@@ -228,10 +228,10 @@ def test_the_threshold_is_chosen_without_test_labels(tmp_path):
 def test_an_image_folder_from_another_generator_trains_the_synthetic_row(data, tmp_path, capsys):
     other = write_real_folder(tmp_path / "gen2d", n=6)
     out = tmp_path / "s"
-    assert main(["sim2real", "--synthetic", str(other), "--real", str(data["real"]), "--test-fraction", "0.25",
+    assert main(["sim2real", "--data", str(other), "--real", str(data["real"]), "--test-fraction", "0.25",
                  "--max-steps", "2", "--runs", "synthetic", "--out", str(out), *COMMON]) == 0
     ckpt = load_checkpoint(out / "synthetic" / "checkpoint.pt")
     assert ckpt["args"]["real"] == str(other) and ckpt["args"]["data"] is None and ckpt["args"]["precise_bn"] == 50
-    assert main(["sim2real", "--synthetic", str(other), "--real", str(data["real"]), "--test-fraction", "0.25",
-                 "--max-steps", "2", "--runs", "mixed", "--out", str(out), *COMMON]) == 2
+    assert main(["sim2real", "--data", str(other), "--real", str(data["real"]), "--test-fraction", "0.25",
+                 "--max-steps", "2", "--runs", "mixed", "--out", str(out), *COMMON]) == 1
     assert "trains the 'synthetic' row only" in capsys.readouterr().err

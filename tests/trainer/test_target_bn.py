@@ -108,10 +108,10 @@ def test_adapt_checkpoint_writes_a_new_model_and_leaves_the_source(trained, tmp_
 def test_cli_adapt_bn_and_its_errors(trained, tmp_path, capsys):
     _photos(tmp_path / "site", 3, level=90)
     out = tmp_path / "a.pt"
-    assert main(["adapt-bn", str(trained["ckpt"]), "--target", str(tmp_path / "site"), "--out", str(out),
+    assert main(["adapt-bn", "-c", str(trained["ckpt"]), "--target", str(tmp_path / "site"), "--out", str(out),
                  "--batches", "2", "-b", "2", "-j", "0"]) == 0
     assert "from 3 photos" in capsys.readouterr().out and out.is_file()
-    assert main(["adapt-bn", str(trained["ckpt"]), "--target", str(tmp_path / "nope"), "--out", str(out)]) == 2
+    assert main(["adapt-bn", "-c", str(trained["ckpt"]), "--target", str(tmp_path / "nope"), "--out", str(out)]) == 1
     err = capsys.readouterr().err.strip()
     assert "no such folder" in err and len(err.splitlines()) == 1
 
@@ -133,7 +133,7 @@ def test_seg_bn_target_runs_after_training_and_is_recorded(trained, tmp_path):
 def test_seg_bn_target_is_checked_before_training(trained, tmp_path, capsys):
     run = tmp_path / "run"
     assert main(["seg", "--real", str(trained["real"]), "--arch", "unet", "-b", "2", "--crop", "32", "-j", "0",
-                 "--no-progress", "--max-steps", "2", "--bn-target", str(tmp_path / "nope"), "--out", str(run)]) == 2
+                 "--no-progress", "--max-steps", "2", "--bn-target", str(tmp_path / "nope"), "--out", str(run)]) == 1
     assert "no such folder" in capsys.readouterr().err
     assert not (run / "checkpoint.pt").exists()
 
@@ -141,7 +141,7 @@ def test_seg_bn_target_is_checked_before_training(trained, tmp_path, capsys):
 def test_sim2real_bn_row_reuses_the_synthetic_weights(trained, tmp_path):
     shards = write_shards(tmp_path / "shards", per_shard=4)
     out = tmp_path / "s2r"
-    assert main(["sim2real", "--synthetic", str(shards), "--real", str(trained["real"]), "--test-fraction",
+    assert main(["sim2real", "--data", str(shards), "--real", str(trained["real"]), "--test-fraction",
                  "0.25", "--target", "--max-steps", "2", "--runs", "synthetic,synthetic+bn", "--arch", "unet",
                  "-b", "2", "--crop", "32", "-j", "0", "--no-progress", "--out", str(out)]) == 0
     table = json.loads((out / "sim2real.json").read_text())

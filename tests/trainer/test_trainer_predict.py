@@ -50,7 +50,7 @@ def test_predict_without_skip_bad_stops_on_the_corrupt_file(tmp_path, capsys):
     _, bad = _folder_one_good_one_corrupt(tmp_path / "photos")
     rc = main(["predict", str(tmp_path / "photos"), "-c", str(ckpt), "--out", str(tmp_path / "pred"), "--no-progress"])
     err = capsys.readouterr().err.strip().splitlines()
-    assert rc == 2 and len(err) == 1 and str(bad) in err[0]
+    assert rc == 1 and len(err) == 1 and str(bad) in err[0]
 
 
 def test_predict_skip_bad_with_nothing_readable_fails_with_report(tmp_path, capsys):
@@ -59,7 +59,7 @@ def test_predict_skip_bad_with_nothing_readable_fails_with_report(tmp_path, caps
     (tmp_path / "photos" / "broken.jpg").write_bytes(b"garbage")
     out = tmp_path / "pred"
     rc = main(["predict", str(tmp_path / "photos"), "-c", str(ckpt), "--out", str(out), "--skip-bad", "--no-progress"])
-    assert rc == 2 and "report.json" in capsys.readouterr().err
+    assert rc == 1 and "report.json" in capsys.readouterr().err
     rep = json.loads((out / "report.json").read_text())
     assert rep["predicted"] == [] and len(rep["skipped"]) == 1
 
@@ -88,7 +88,7 @@ def test_predict_intrinsics_and_depth_give_metres(tmp_path, capsys):
     # --intrinsics without depth: one line naming the image
     rc = main(["predict", str(root), "-c", str(ckpt), "--out", str(out), "--no-progress", "--intrinsics", str(K)])
     err = capsys.readouterr().err.strip().splitlines()
-    assert rc == 2 and len(err) == 1 and "needs depth" in err[0]
+    assert rc == 1 and len(err) == 1 and "needs depth" in err[0]
 
 
 def test_predict_on_shards_uses_each_samples_depth_and_k(tmp_path):

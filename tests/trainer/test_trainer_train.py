@@ -67,12 +67,12 @@ def test_rgbd_train_evaluate_predict(data, tmp_path):
 
 
 def test_cli_bad_inputs_exit_nonzero(tmp_path, capsys):
-    assert main(["seg", "--real", str(tmp_path / "missing")]) == 2
+    assert main(["seg", "--real", str(tmp_path / "missing")]) == 1
     assert "missing" in capsys.readouterr().err
     bad = tmp_path / "bad.pt"
     bad.write_bytes(b"garbage")
-    assert main(["evaluate", "-c", str(bad), "--real", str(tmp_path)]) == 2
+    assert main(["evaluate", "-c", str(bad), "--real", str(tmp_path)]) == 1
     assert "bad.pt" in capsys.readouterr().err
     (tmp_path / "images").mkdir()
-    assert main(["split", str(tmp_path), "--out", str(tmp_path / "s")]) == 2
+    assert main(["split", str(tmp_path), "--out", str(tmp_path / "s")]) == 1
     assert "no images" in capsys.readouterr().err

@@ -1,0 +1,25 @@
+"""``cracktrain adapt-bn``: a model's BatchNorm statistics moved to a site's unlabeled photos (AdaBN)."""
+from __future__ import annotations
+
+import argparse
+
+from trainer.commands._checkpoint import resolve_checkpoint
+
+NAME = "adapt-bn"
+HELP = "move a trained model's BatchNorm statistics to a folder of unlabeled site photos (AdaBN)"
+
+
+def add_args(p: argparse.ArgumentParser) -> None:
+    from trainer.adapt_bn import add_adapt_bn_args
+
+    add_adapt_bn_args(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    from trainer.adapt_bn import run_adapt_bn
+
+    resolve_checkpoint(args, NAME)
+    r = run_adapt_bn(args)
+    print(f"BN statistics of {r['source']} re-estimated on {r['batches']} batches of {r['crop']}-px crops "
+          f"from {r['photos']} photos in {r['target']}; wrote {args.out}")
+    return 0

@@ -1,0 +1,24 @@
+"""``cracktrain benchmark``: the cross-domain scoreboard."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+NAME = "benchmark"
+HELP = "score models on DeepCrack's test split and the cross-domain sets at their validation thresholds"
+
+
+def add_args(p: argparse.ArgumentParser) -> None:
+    from trainer.benchmark import add_benchmark_args
+
+    add_benchmark_args(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    from trainer.benchmark import run_benchmark
+
+    r = run_benchmark(args)
+    print(Path(r["out"], "benchmark.md").read_text())
+    print(f"scored {r['models']} models ({r['labels']} rows) on {len(r['sets'])} sets in {r['seconds']} s; "
+          f"wrote {r['out']}/benchmark.csv, .md, .png, .json")
+    return 0

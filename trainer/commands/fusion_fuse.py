@@ -1,0 +1,28 @@
+"""``cracktrain fuse``: fuse a stereo and a ToF/LiDAR disparity file with a trained confidence CNN."""
+from __future__ import annotations
+
+import argparse
+
+from trainer.errors import TrainerInputError
+
+NAME = "fuse"
+HELP = "fuse a stereo and a ToF/LiDAR disparity file with a trained confidence CNN"
+
+
+def add_args(p: argparse.ArgumentParser) -> None:
+    from trainer.fusion_apply import add_fuse_args
+
+    add_fuse_args(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    from fusion.depth_metrics import format_table
+    from trainer.fusion_apply import run_fuse
+
+    if args.ckpt is None:
+        raise TrainerInputError("--checkpoint is required")
+    res = run_fuse(args)
+    if "metrics" in res:
+        print(format_table(res["metrics"]))
+    print(f"wrote {', '.join(res['written'])} to {res['out']}")
+    return 0
