@@ -6,7 +6,7 @@ import numpy as np
 from crackgen.config.spec import LidarSpec, TofSpec
 from crackgen.sim.raycast import MeshRaycaster
 from crackgen.sim.rig import Rig
-from fusion.camera import Camera, intrinsics_from_fov, look_at, mounted_pose
+from fusion.geometry.camera import Camera, intrinsics_from_fov, look_at, mounted_pose
 
 
 def plane_mesh(size_m: float = 4.0, z: float = 0.0, n: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -13,6 +13,7 @@ import sys
 from typing import Sequence
 
 from crackgen.cli_aliases import deprecation_note
+from fusion.errors import FusionError
 from trainer.errors import TrainerInputError
 
 EXIT_BAD_INPUT = 1
@@ -49,7 +50,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     try:
         return args.func(args)
-    except TrainerInputError as exc:
+    except (TrainerInputError, FusionError) as exc:
         print(f"cracktrain {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

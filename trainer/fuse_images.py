@@ -1,7 +1,7 @@
 """``cracktrain merge-stack``: guided-filter fusion of an exposure or focus stack, with its quality scores.
 
 Reads N registered images of one size (8- or 16-bit, grey or colour), fuses them with
-``fusion.image_fusion`` (2-level, or the thesis's 3-level), writes the fused image (8-bit, or
+``fusion.image.fuse`` (2-level, or the thesis's 3-level), writes the fused image (8-bit, or
 16-bit when every input is) and returns Q_Y, Q_C, Q_G and Q_MI of the fusion.
 """
 from __future__ import annotations
@@ -38,8 +38,8 @@ def _read(path: str) -> tuple[np.ndarray, int]:
 
 
 def run_fuse(args: argparse.Namespace) -> dict:
-    from fusion.fusion_metrics import fusion_quality
-    from fusion.image_fusion import FusionError, fuse_images
+    from fusion.image.fuse import ImageFusionError, fuse_images
+    from fusion.image.metrics import fusion_quality
 
     if len(args.images) < 2:
         raise TrainerInputError(f"merge-stack needs at least 2 images, got {len(args.images)}")
@@ -47,12 +47,12 @@ def run_fuse(args: argparse.Namespace) -> dict:
     imgs = [a for a, _ in loaded]
     ndims = {a.ndim for a in imgs}
     if len(ndims) > 1:  # mixed grey and colour: fuse in grey
-        from fusion.image_fusion import luminance
+        from fusion.image.fuse import luminance
 
         imgs = [luminance(a) for a in imgs]
     try:
         fused = fuse_images(imgs, args.levels)
-    except FusionError as exc:
+    except ImageFusionError as exc:
         raise TrainerInputError(f"{exc} ({', '.join(args.images)})") from None
     top = 65535 if all(m == 65535 for _, m in loaded) else 255
     out = Path(args.out)

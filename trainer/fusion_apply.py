@@ -2,7 +2,7 @@
 
 ``fuse_scene`` is shared by ``cracktrain fuse`` (files) and ``cracktrain
 fusion-eval`` (held-out shards), so both fuse identically. A post-filter
-(``fusion.postfilter``) runs either on both candidate disparities before the
+(``fusion.depth.postfilter``) runs either on both candidate disparities before the
 CNN sees them (``before``) or on the fused maps (``after``).
 
 ``cracktrain fuse`` is the plug-in point for stronger inputs: any stereo
@@ -21,10 +21,10 @@ import numpy as np
 import torch
 
 from crackgen.cli_aliases import deprecated_alias
-from fusion.confidence import fuse_max, fuse_weighted, softmax_weights
-from fusion.depth_metrics import disparity_metrics
-from fusion.fusion_inputs import VARIANTS, FusionInputError, build_inputs
-from fusion.postfilter import FILTERS, STAGES, PostFilter, PostFilterError
+from fusion.depth.confidence import fuse_max, fuse_weighted, softmax_weights
+from fusion.depth.inputs import VARIANTS, FusionInputError, build_inputs
+from fusion.depth.metrics import disparity_metrics
+from fusion.depth.postfilter import FILTERS, STAGES, PostFilter, PostFilterError
 from trainer.checkpoint import load_checkpoint
 from trainer.confidence_cnn import THESIS, ConfidenceCNN
 from trainer.errors import TrainerInputError

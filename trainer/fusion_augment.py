@@ -32,7 +32,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from fusion.stereo import left_right_difference
+from fusion.geometry.stereo import left_right_difference
 
 FAILURE_KINDS = ("offset", "flat", "speckle")
 

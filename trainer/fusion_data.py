@@ -1,7 +1,7 @@
 """Scenes for the confidence CNN: from shards or from files, plus the random-patch sampler.
 
 A ``FusionScene`` holds the raw (unnormalised) input stack of one scene (see
-``fusion.fusion_inputs``) and, when known, its GT disparity. Scenes come from
+``fusion.depth.inputs``) and, when known, its GT disparity. Scenes come from
 
 * shards written by ``crackgen generate`` with stereo + ToF (+ LiDAR) on:
   members ``rgb``, ``right``, ``disp_sgm``, ``disp_tof``/``tofamp`` or
@@ -29,10 +29,10 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from fusion.fusion_inputs import LIDAR_VARIANTS, VARIANTS, FusionInputError, FusionInputs, build_inputs, replace_lidar
-from fusion.layered_stereo import StereoView
-from fusion.scanline_lidar import random_scanline_lidar
-from fusion.stereo import to_grey
+from fusion.depth.inputs import LIDAR_VARIANTS, VARIANTS, FusionInputError, FusionInputs, build_inputs, replace_lidar
+from fusion.depth.layered_stereo import StereoView
+from fusion.depth.scanline_lidar import random_scanline_lidar
+from fusion.geometry.stereo import to_grey
 from trainer.errors import TrainerInputError
 from trainer.fusion_occluders import occluder_scenes
 from trainer.imageio import DEPTH_EXTS, read_float_map

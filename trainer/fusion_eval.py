@@ -22,9 +22,9 @@ import torch
 from tqdm import tqdm
 
 from crackgen.cli_aliases import deprecated_alias
-from fusion.depth_metrics import average_metrics, disparity_metrics, format_table
-from fusion.fusion_inputs import LIDAR_VARIANTS, OTHER_NAME
-from fusion.postfilter import PostFilter
+from fusion.depth.inputs import LIDAR_VARIANTS, OTHER_NAME
+from fusion.depth.metrics import average_metrics, disparity_metrics, format_table
+from fusion.depth.postfilter import PostFilter
 from trainer.errors import TrainerInputError
 from trainer.fusion_apply import add_stereo_holes_arg, fuse_scene, load_fusion_model
 from trainer.fusion_data import load_shard_scenes, shard_keys

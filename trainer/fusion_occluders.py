@@ -2,7 +2,7 @@
 
 Each training scene gets K more versions with another training scene pasted
 in front of it inside a random blob, nearer by a drawn disparity jump
-(``fusion.layered_stereo``). SGBM is run again on the composited pair, so its
+(``fusion.depth.layered_stereo``). SGBM is run again on the composited pair, so its
 failures at the new edge (half-occlusions, a smeared boundary, the fattened
 foreground) are SGBM's own, and a scan-line LiDAR is drawn from the composited
 GT (``random_scanline_lidar``), so its interpolation smears across the edge as a
@@ -15,10 +15,10 @@ from typing import Sequence
 
 import numpy as np
 
-from fusion.fusion_inputs import FusionInputs, build_inputs
-from fusion.layered_stereo import StereoView, composite, occluder_mask
-from fusion.scanline_lidar import random_scanline_lidar
-from fusion.stereo import search_range, sgbm_disparity, to_grey
+from fusion.depth.inputs import FusionInputs, build_inputs
+from fusion.depth.layered_stereo import StereoView, composite, occluder_mask
+from fusion.depth.scanline_lidar import random_scanline_lidar
+from fusion.geometry.stereo import search_range, sgbm_disparity, to_grey
 from trainer.errors import TrainerInputError
 
 Grey = tuple[np.ndarray, np.ndarray] | None

@@ -4,8 +4,8 @@ For each folder of ``../shared/data/real/stereo`` (Middlebury 2003 or ETH3D /
 Middlebury 2014 two-view, recognised by their files), or ``skimage:motorcycle``
 (Middlebury 2014 Motorcycle as shipped in scikit-image, a scene no setting was
 chosen on): SGBM disparity of the real pair
-(``fusion.stereo``), a scan-line LiDAR sampled from the GT with noise
-(``fusion.scanline_lidar``, seeded per scene), the 3-channel inputs, then the
+(``fusion.geometry.stereo``), a scan-line LiDAR sampled from the GT with noise
+(``fusion.depth.scanline_lidar``, seeded per scene), the 3-channel inputs, then the
 same rows as ``fusion-eval``. The CNN is the one trained on synthetic shards.
 """
 from __future__ import annotations
@@ -16,8 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fusion.fusion_inputs import FusionInputError, build_inputs
-from fusion.real_data import (
+from fusion.depth.inputs import FusionInputError, build_inputs
+from fusion.depth.scanline_lidar import scanline_lidar
+from fusion.geometry.real_data import (
     SKIMAGE_MOTORCYCLE,
     SKIMAGE_MOTORCYCLE_SCENE,
     RealDataError,
@@ -25,8 +26,7 @@ from fusion.real_data import (
     load_middlebury_scene,
     load_skimage_motorcycle,
 )
-from fusion.scanline_lidar import scanline_lidar
-from fusion.stereo import search_range, sgbm_disparity
+from fusion.geometry.stereo import search_range, sgbm_disparity
 from trainer.errors import TrainerInputError
 from trainer.fusion_data import FusionScene
 

@@ -28,10 +28,10 @@ import torch
 from tqdm import tqdm
 
 from crackgen.cli_aliases import deprecated_alias
-from fusion.confidence import confidence_target, fuse_max
-from fusion.densify import METHODS as DENSIFY_METHODS
-from fusion.depth_metrics import disparity_metrics
-from fusion.fusion_inputs import LIDAR_VARIANTS, VARIANTS
+from fusion.depth.confidence import confidence_target, fuse_max
+from fusion.depth.densify import METHODS as DENSIFY_METHODS
+from fusion.depth.inputs import LIDAR_VARIANTS, VARIANTS
+from fusion.depth.metrics import disparity_metrics
 from trainer.checkpoint import load_checkpoint, save_checkpoint
 from trainer.confidence_cnn import DILATIONS, IN_CHANNELS, ConfidenceCNN, receptive_field
 from trainer.errors import TrainerInputError

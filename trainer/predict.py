@@ -2,13 +2,13 @@
 
 Per image it writes ``STEM_prob.png`` (probability x 255), ``STEM_mask.png``
 (0/255), ``STEM_overlay.png`` (crack pixels tinted red) and ``STEM.json`` with
-the crack pixel count and the crack measurement of ``fusion.crack_measure``:
+the crack pixel count and the crack measurement of ``fusion.measure.crack_measure``:
 ``crack_length`` is the thesis's length (the longest in-mask path, tip to tip), and
 ``measurement`` holds the sum of tip-to-tip lengths, the total length with branches,
 mean and max width and the per-crack figures.  Units:
 
 - metres in the camera view with ``--intrinsics K.json`` (fx, fy, cx, cy) and depth
-  (``--real-depth-dir`` ..., dense or sparse: ``fusion.metric_size`` fills the crack and
+  (``--real-depth-dir`` ..., dense or sparse: ``fusion.measure.metric_size`` fills the crack and
   the holes from the surrounding surface and lifts the path to 3-D);
 - metres with ``--pixel-size-m`` (flat, fronto-parallel photos);
 - otherwise pixels.
@@ -126,8 +126,8 @@ def _shard_sample(root: Path, s: dict[str, Any], model_depth: str) -> dict[str, 
 
 def _measure(mask: np.ndarray, sample: dict[str, Any], K: np.ndarray | None, args: argparse.Namespace):
     """(measurement, unit): metres in the view (K + depth), metres per pixel, or pixels."""
-    from fusion.crack_measure import measure_cracks
-    from fusion.metric_size import MetricSizeError, measure_in_view
+    from fusion.measure.crack_measure import measure_cracks
+    from fusion.measure.metric_size import MetricSizeError, measure_in_view
 
     K = sample.get("K", K)
     if K is not None:
@@ -142,7 +142,7 @@ def _measure(mask: np.ndarray, sample: dict[str, Any], K: np.ndarray | None, arg
 
 
 def run_predict(args: argparse.Namespace) -> PredictResult:
-    from fusion.metric_size import MetricSizeError, load_intrinsics  # pure numpy/scipy
+    from fusion.measure.metric_size import MetricSizeError, load_intrinsics  # pure numpy/scipy
 
     if args.intrinsics and args.pixel_size_m:
         raise TrainerInputError("give --intrinsics (with depth) or --pixel-size-m, not both")

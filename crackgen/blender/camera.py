@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from crackgen.errors import CrackgenError
-from fusion.camera import Camera, invert_pose
+from fusion.geometry.camera import Camera, invert_pose
 
 SENSOR_WIDTH_MM = 36.0  # any value works: lens is derived from fx for this width
 _CV_TO_BLENDER = np.diag([1.0, -1.0, -1.0, 1.0])

@@ -21,7 +21,7 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationErr
 from pydantic_core import PydanticCustomError
 
 from crackgen.errors import CrackgenError
-from fusion.lens import Distortion
+from fusion.geometry.lens import Distortion
 
 Scalar = Union[bool, int, float, str]
 
@@ -328,7 +328,7 @@ class ShadowSection(Section):
 
 
 class DistortionSection(Section):
-    """Brown-Conrady lens distortion, OpenCV convention (``fusion.lens``), drawn per sample. Off by default."""
+    """Brown-Conrady lens distortion, OpenCV convention (``fusion.geometry.lens``), drawn per sample. Off by default."""
 
     probability: float = Field(0.0, ge=0, le=1, description="share of samples taken through a distorting lens (0 = pinhole, the default)")
     k1: _t(-1, 1) = _d({"min": -0.1, "max": 0.05}, "radial k1 (negative = barrel: wide-angle lenses)")

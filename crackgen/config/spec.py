@@ -300,7 +300,7 @@ class AdaptSpec:
 
 @dataclass
 class LensSpec:
-    """Lens distortion of the RGB views (``[camera.distortion]``, OpenCV's Brown-Conrady model, ``fusion.lens``).
+    """Lens distortion of the RGB views (``[camera.distortion]``, OpenCV's Brown-Conrady model, ``fusion.geometry.lens``).
 
     Left out of the sample JSON when off, so pinhole samples read exactly as before it existed."""
 

@@ -2,7 +2,7 @@
 
 Why one stage over all members: the RGB, the right view, the label, the depth and every
 sensor map projected into the RGB view must stay on the same pixels, so one map
-(``fusion.lens.distortion_map``) resamples them all: rendered views bilinearly, everything
+(``fusion.geometry.lens.distortion_map``) resamples them all: rendered views bilinearly, everything
 else by nearest neighbour (a label stays 0/255, a sparse map keeps its -1 holes and its
 measured values unblended). Members outside the RGB view (``tofraw``, ``crackmap``) are
 left as they are. See ``crackgen.sim.rig`` for the canvas.
@@ -15,7 +15,7 @@ import numpy as np
 
 from crackgen.shards.members import member_for_file
 from crackgen.sim.rig import Rig
-from fusion.lens import distortion_map, warp
+from fusion.geometry.lens import distortion_map, warp
 
 
 def lens_maps(rig: Rig) -> tuple[np.ndarray, np.ndarray]:

@@ -36,7 +36,7 @@ from crackgen.procedural.crack_shapes.network import network_paths
 from crackgen.procedural.crack_shapes.paths import MIN_HALF_WIDTH_PX, render_paths, to_texels
 from crackgen.procedural.crack_shapes.stairstep import JointGrid, stairstep_paths
 from crackgen.procedural.noise import fbm
-from fusion.crack_length import crack_components, skeleton
+from fusion.measure.crack_length import crack_components, skeleton
 
 __all__ = ["CrackMapError", "CrackMap", "crack_map", "texel_centres", "mask_at_uv", "nearest_texel", "depth_at_uv"]
 

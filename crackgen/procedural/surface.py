@@ -163,7 +163,7 @@ def centreline_depth_kept(cm: CrackMap, vertices: np.ndarray, grid_px: int) -> n
     """Mesh depth / crack-map depth at the crack map's skeleton texels (1 = all kept), for reports."""
     skel = cm.skeleton
     if skel is None:
-        from fusion.crack_length import skeleton
+        from fusion.measure.crack_length import skeleton
 
         skel = skeleton(cm.mask)
     jj, ii = np.nonzero(np.asarray(skel, bool) & (cm.depth_m > 0))

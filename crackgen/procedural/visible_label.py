@@ -48,7 +48,7 @@ def local_half_width(mask: np.ndarray, texel_m: float, skel: np.ndarray | None =
     if not mask.any():
         return out
     if skel is None:
-        from fusion.crack_length import skeleton
+        from fusion.measure.crack_length import skeleton
 
         skel = skeleton(mask)
     skel = np.asarray(skel, dtype=bool) & mask

@@ -29,7 +29,7 @@ from crackgen.procedural.visible_label import (
 )
 from crackgen.sim.raycast import MeshRaycaster, RayHits
 from crackgen.sim.visibility import decide_label, label_contrast
-from fusion.camera import Camera
+from fusion.geometry.camera import Camera
 
 
 @dataclass

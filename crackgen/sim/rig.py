@@ -5,7 +5,7 @@ the written metadata all use the very same K and T (OpenCV convention).
 
 With lens distortion (``spec.lens``) the renderer, the ray caster and every sensor work on a
 pinhole *canvas*: the RGB camera with the same focal length and pose, grown by the margins
-the lens needs (``fusion.lens.canvas_margins``). ``lens_warp`` then turns every RGB-view
+the lens needs (``fusion.geometry.lens.canvas_margins``). ``lens_warp`` then turns every RGB-view
 member into the distorted W x H image of the camera that is exported (``rgb_out``: the
 recipe's K, plus the coefficients).
 """
@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from crackgen.config.spec import SampleSpec
-from fusion.camera import Camera, intrinsics_from_focal, intrinsics_from_fov, look_at, mounted_pose
-from fusion.lens import Distortion, canvas_K, canvas_margins
+from fusion.geometry.camera import Camera, intrinsics_from_focal, intrinsics_from_fov, look_at, mounted_pose
+from fusion.geometry.lens import Distortion, canvas_K, canvas_margins
 
 
 @dataclass(frozen=True)

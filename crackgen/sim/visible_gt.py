@@ -3,7 +3,7 @@
 The crack map's ``length_m`` covers the whole 1-3 m surface patch; a measurement from one
 image can only see the crack inside the view.  So the crack-map mask (the thesis mask,
 Z < t: what ``mask_thesis.png`` / the thesis-policy ``mask.png`` show) is clipped to the
-texels the camera sees, and measured on the surface with ``fusion.crack_measure`` at the
+texels the camera sees, and measured on the surface with ``fusion.measure.crack_measure`` at the
 crack map's texel size: the same definitions as a measurement from the image, but exact
 geometry, in metres on the (flat) surface patch.
 
@@ -25,8 +25,8 @@ import numpy as np
 from scipy import ndimage
 
 from crackgen.procedural.crackmap import CrackMap
-from fusion.camera import Camera
-from fusion.crack_measure import measure_cracks
+from fusion.geometry.camera import Camera
+from fusion.measure.crack_measure import measure_cracks
 
 __all__ = ["visible_texels", "visible_ground_truth"]
 

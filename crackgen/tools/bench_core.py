@@ -33,8 +33,8 @@ def bench_core(px: int = 1024, grid: int = 384, octaves: int = 6, repeat: int = 
     from crackgen.config.spec import make_spec
     from crackgen.procedural.crackmap import crack_map
     from crackgen.procedural.surface import surface_mesh, surface_vertices
-    from fusion.crack_length import crack_components, skeleton
-    from fusion.crack_measure import measure_cracks
+    from fusion.measure.crack_length import crack_components, skeleton
+    from fusion.measure.crack_measure import measure_cracks
 
     spec = make_spec(Recipe(), index)
     cs = dataclasses.replace(spec.crack, octaves=octaves)

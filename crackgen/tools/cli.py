@@ -356,9 +356,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from fusion.errors import FusionError
+
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
+    except FusionError as exc:  # bad geometry or sensor input that no command-specific check caught first
+        return _err(str(exc))
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130

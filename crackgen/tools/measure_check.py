@@ -2,7 +2,7 @@
 
 For every sample with a visible crack, the rendered thesis mask (``mask_thesis.png``, or
 ``mask.png`` under ``[label] policy = "thesis"``) is measured in metres with the ray-cast
-depth and the camera's K (``fusion.metric_size.measure_in_view``: what ``cracktrain predict
+depth and the camera's K (``fusion.measure.metric_size.measure_in_view``: what ``cracktrain predict
 --intrinsics`` does with a perfect mask and depth), and compared with the sample JSON's
 ``visible`` record (the same quantities on the crack map, exact geometry).  Reported per
 quantity: the median and 90th percentile of |measured - GT| / GT over the samples.
@@ -47,7 +47,7 @@ def measure_check(path: str | os.PathLike, limit: int | None = None, progress: b
     from tqdm import tqdm
 
     from crackgen.shards import ShardError, iter_samples, open_dataset
-    from fusion.metric_size import measure_in_view
+    from fusion.measure.metric_size import measure_in_view
 
     try:
         ds = open_dataset(str(path))

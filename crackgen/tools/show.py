@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from crackgen.errors import CrackgenError
-from fusion.camera import Camera
+from fusion.geometry.camera import Camera
 
 
 class ShowError(CrackgenError, ValueError):

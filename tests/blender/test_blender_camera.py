@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from crackgen.blender.camera import CameraConversionError, blender_camera_params
-from fusion.camera import Camera, intrinsics_from_focal, look_at
+from fusion.geometry.camera import Camera, intrinsics_from_focal, look_at
 
 
 def cam(w=96, h=64, cx=3.3, cy=-2.6, roll=0.3) -> Camera:

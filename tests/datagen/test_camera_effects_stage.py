@@ -7,7 +7,7 @@ from tiny_recipes import tiny_recipe
 
 from crackgen.config.recipe import RecipeError, parse_recipe
 from crackgen.datagen.pipeline import STAGES, SampleProducer
-from fusion.stereo import sgbm_disparity
+from fusion.geometry.stereo import sgbm_disparity
 
 ALL_ON = "[camera_effects]\nenabled = true\nexposure = 1.0\nvignetting = 1.0\nnoise = 1.0\njpeg = 1.0\n"
 

@@ -9,7 +9,7 @@ from crackgen.config.recipe import Recipe
 from crackgen.config.spec import CrackSpec, SampleSpec, make_spec
 from crackgen.procedural.crackmap import CrackMapError, crack_map, depth_at_uv, mask_at_uv, texel_centres
 from crackgen.procedural.noise import fbm
-from fusion.crack_length import crack_components
+from fusion.measure.crack_length import crack_components
 
 
 def _spec(**over) -> CrackSpec:

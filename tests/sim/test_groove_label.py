@@ -18,7 +18,7 @@ from crackgen.procedural.surface import mesh_depth_map, surface_faces, surface_u
 from crackgen.procedural.visible_label import VisibleLabelError, groove_visible_mask
 from crackgen.sim.groundtruth import label_texels, mask_lookup, view_ground_truth
 from crackgen.sim.raycast import MeshRaycaster
-from fusion.camera import Camera, intrinsics_from_focal, look_at
+from fusion.geometry.camera import Camera, intrinsics_from_focal, look_at
 
 N, SIZE_M = 240, 0.24  # 1 mm texels
 G = 81  # vertex every 3 texels (3 mm)

@@ -4,7 +4,7 @@ import pytest
 
 from crackgen.sim.groundtruth import mask_lookup, view_ground_truth
 from crackgen.sim.raycast import MeshRaycaster
-from fusion.camera import Camera, intrinsics_from_focal, look_at
+from fusion.geometry.camera import Camera, intrinsics_from_focal, look_at
 
 
 def grid_plane(size_m: float, g: int, z=None):

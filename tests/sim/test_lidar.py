@@ -39,7 +39,7 @@ def test_scan_lines_fall_on_expected_elevations(plane):
 
 
 def ray_plane(rig, res):
-    from fusion.camera import invert_pose
+    from fusion.geometry.camera import invert_pose
 
     o = invert_pose(rig.T_lidar_world)[:3, 3]
     d = res.points_world - o
@@ -68,7 +68,7 @@ def test_dropout_rate_and_max_range(plane):
 
 
 def invert_center_height(rig) -> float:
-    from fusion.camera import invert_pose
+    from fusion.geometry.camera import invert_pose
 
     return float(invert_pose(rig.T_lidar_world)[2, 3])
 

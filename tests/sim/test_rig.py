@@ -5,7 +5,7 @@ import pytest
 from crackgen.config.recipe import Recipe
 from crackgen.config.spec import make_spec
 from crackgen.sim.rig import make_rig
-from fusion.camera import Camera, invert_pose
+from fusion.geometry.camera import Camera, invert_pose
 
 
 @pytest.fixture

@@ -10,8 +10,8 @@ from crackgen.sim.groundtruth import view_ground_truth
 from crackgen.sim.sensors import sensor_rng
 from crackgen.sim.sensors.stereo import SYNTH3_CHANNELS, simulate_stereo
 from crackgen.sim.sensors.tof import SensorError, constant_albedo, simulate_tof
-from fusion.disparity import depth_to_disparity
-from fusion.stereo import StereoInputError, left_right_difference, sgbm_disparity
+from fusion.geometry.disparity import depth_to_disparity
+from fusion.geometry.stereo import StereoInputError, left_right_difference, sgbm_disparity
 
 PLANE_M = 4.0
 

@@ -12,7 +12,7 @@ from crackgen.procedural.crackmap import CrackMap
 from crackgen.sim.groundtruth import view_ground_truth, view_label
 from crackgen.sim.raycast import MeshRaycaster
 from crackgen.sim.visibility import VisibilityError, decide_label, label_contrast, ring
-from fusion.camera import Camera, intrinsics_from_focal, look_at
+from fusion.geometry.camera import Camera, intrinsics_from_focal, look_at
 
 
 def grey_with_line(grey=128, line=32):

@@ -11,7 +11,7 @@ from crackgen.procedural.crackmap import CrackMap
 from crackgen.sim.groundtruth import view_ground_truth
 from crackgen.sim.raycast import MeshRaycaster
 from crackgen.sim.visible_gt import visible_ground_truth, visible_texels
-from fusion.camera import Camera, intrinsics_from_focal, look_at
+from fusion.geometry.camera import Camera, intrinsics_from_focal, look_at
 
 SIZE, N = 2.0, 400
 TEXEL = SIZE / N

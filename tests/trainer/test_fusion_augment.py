@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fusion.confidence import confidence_target
+from fusion.depth.confidence import confidence_target
 from trainer.cli import main as cli_main
 from trainer.fusion_augment import FAILURE_KINDS, corrupt_stereo
 

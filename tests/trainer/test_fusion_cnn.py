@@ -176,7 +176,7 @@ def test_real_stereo_scene_has_lidar_inputs_and_gt():
 def test_skimage_motorcycle_is_a_real_stereo_scene_with_gt():
     """scikit-image's bundled Middlebury 2014 pair loads without files here, and its GT is a disparity: the
     left view matches the right view shifted by it."""
-    from fusion.real_data import load_skimage_motorcycle
+    from fusion.geometry.real_data import load_skimage_motorcycle
     from trainer.fusion_real import real_scene
 
     s = load_skimage_motorcycle()
@@ -198,7 +198,7 @@ def test_skimage_motorcycle_is_a_real_stereo_scene_with_gt():
 
 
 def test_filled_stereo_holes_take_the_other_sensor_unless_asked(fusion_shards):
-    from fusion.fusion_inputs import build_inputs
+    from fusion.depth.inputs import build_inputs
     from trainer.fusion_apply import fuse_scene
 
     smp = fusion_sample(np.random.default_rng(5))

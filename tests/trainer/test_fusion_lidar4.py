@@ -11,8 +11,8 @@ import pytest
 import torch
 from fusion_samples import write_fusion_shards
 
-from fusion.fusion_inputs import build_inputs
-from fusion.stereo import left_right_difference
+from fusion.depth.inputs import build_inputs
+from fusion.geometry.stereo import left_right_difference
 from trainer.cli import main as cli_main
 from trainer.fusion_augment import corrupt_scene_stereo
 from trainer.fusion_data import load_shard_scenes

@@ -15,11 +15,11 @@ import pytest
 import torch
 from fusion_samples import write_fusion_shards
 
-from fusion.densify import interpolate_sparse
-from fusion.depth_metrics import disparity_metrics
-from fusion.fusion_inputs import FusionInputError, build_inputs
-from fusion.postfilter import bm3d_disparity
-from fusion.stereo import left_right_difference
+from fusion.depth.densify import interpolate_sparse
+from fusion.depth.inputs import FusionInputError, build_inputs
+from fusion.depth.metrics import disparity_metrics
+from fusion.depth.postfilter import bm3d_disparity
+from fusion.geometry.stereo import left_right_difference
 from trainer.cli import main as cli_main
 from trainer.errors import TrainerInputError
 from trainer.fusion_data import load_shard_scenes

@@ -16,7 +16,7 @@ def add_args(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fusion.depth_metrics import format_table
+    from fusion.depth.metrics import format_table
     from trainer.fusion_apply import run_fuse
 
     if args.ckpt is None:

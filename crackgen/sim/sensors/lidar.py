@@ -22,8 +22,8 @@ from crackgen.config.spec import LidarSpec
 from crackgen.sim.raycast import MeshRaycaster
 from crackgen.sim.rig import Rig
 from crackgen.sim.sensors.tof import SensorError
-from fusion.camera import invert_pose
-from fusion.projection import project_points
+from fusion.geometry.camera import invert_pose
+from fusion.geometry.projection import project_points
 
 
 @dataclass

@@ -7,7 +7,7 @@ view, d = f*B/Z), left-minus-warped-right grey difference (warped by the
 stereo disparity, 0 where it is invalid), ToF amplitude in the left view
 (-1 none), GT disparity from the ray-cast GT depth and, with a LiDAR, its
 sparse disparity in the left view (the 3-channel LiDAR/stereo variant, Ch. 4.6;
-its interpolated form is recomputed by ``fusion.densify`` on read, so a dense
+its interpolated form is recomputed by ``fusion.depth.densify`` on read, so a dense
 map is not stored for every sample).
 """
 from __future__ import annotations
@@ -19,8 +19,8 @@ import numpy as np
 from crackgen.config.spec import StereoSpec
 from crackgen.sim.rig import Rig
 from crackgen.sim.sensors.tof import SensorError, TofResult
-from fusion.disparity import depth_to_disparity
-from fusion.stereo import left_right_difference, reproject_as_disparity, sgbm_disparity
+from fusion.geometry.disparity import depth_to_disparity
+from fusion.geometry.stereo import left_right_difference, reproject_as_disparity, sgbm_disparity
 
 SYNTH3_CHANNELS = ("disp_stereo", "disp_tof", "lr_diff", "tof_amplitude")
 

@@ -20,7 +20,7 @@ Model, per ToF pixel (each part switchable from ``TofSpec``):
   amplitude (A = 0) is always dropped, even with min_amplitude = 0.
 
 The measured points go to world and are splatted into the RGB view with the
-z-buffer of ``fusion.projection`` (thesis eq. 5.7-5.9).
+z-buffer of ``fusion.geometry.projection`` (thesis eq. 5.7-5.9).
 """
 from __future__ import annotations
 
@@ -34,8 +34,8 @@ from crackgen.config.spec import TofSpec
 from crackgen.errors import CrackgenError
 from crackgen.sim.raycast import MeshRaycaster
 from crackgen.sim.rig import Rig
-from fusion.camera import Camera
-from fusion.projection import project_points
+from fusion.geometry.camera import Camera
+from fusion.geometry.projection import project_points
 
 AlbedoFn = Callable[[np.ndarray], np.ndarray]  # (N,2) UV -> (N,) grey albedo in [0, 1]
 

@@ -1,0 +1,1 @@
+"""Crack measurement: length and width of a crack mask, in pixels or metres."""
