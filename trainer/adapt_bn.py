@@ -14,6 +14,7 @@ from typing import Any, Sequence
 import torch
 
 from trainer.checkpoint import load_checkpoint, save_checkpoint
+from trainer.device import pick_device
 from trainer.errors import TrainerInputError
 from trainer.scoring import load_model
 from trainer.site_adapt import targets_from_folder
@@ -59,7 +60,7 @@ def adapt_checkpoint(src: str | Path, dst: str | Path, photos: Sequence[str], de
 
 
 def run_adapt_bn(args: argparse.Namespace) -> dict[str, Any]:
-    device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    device = pick_device(args.device)
     photos = targets_from_folder(args.target)
     return adapt_checkpoint(args.checkpoint, args.out, photos, device, target=str(args.target), batches=args.batches,
                             batch_size=args.batch_size, crop=args.crop, workers=args.workers, seed=args.seed)

@@ -16,6 +16,7 @@ import torch
 from torch.utils.data import DataLoader
 
 from trainer.builders import add_data_args, real_folder, sample_config_from_args, shard_source
+from trainer.device import pick_device
 from trainer.errors import TrainerInputError
 from trainer.losses import make_loss
 from trainer.models import ARCHS, build_model
@@ -115,7 +116,7 @@ def run_bench(args: argparse.Namespace) -> dict[str, Any]:
     elif args.no_model:
         raise TrainerInputError("nothing to benchmark: give --data/--real or drop --no-model")
     if not args.no_model:
-        device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+        device = pick_device(args.device)
         if args.fusion:
             res["model"] = bench_fusion_model(args.fusion, args.model_size, args.batch_size, args.steps, device)
             return res

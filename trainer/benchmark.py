@@ -25,6 +25,7 @@ from tqdm import tqdm
 
 from trainer.builders import add_split_args
 from trainer.checkpoint import load_checkpoint
+from trainer.device import pick_device
 from trainer.error_overlays import describe_errors
 from trainer.errors import TrainerInputError
 from trainer.eval_sets import (
@@ -143,7 +144,7 @@ def _slug(text: str) -> str:
 
 def run_benchmark(args: argparse.Namespace) -> dict[str, Any]:
     out = Path(args.out)
-    device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    device = pick_device(args.device)
     specs = args.sets or list(DEFAULT_SETS)
     sets = [parse_set(s, args, args.real_root) for s in specs]
     if len({s.name for s in sets}) != len(sets):

@@ -14,11 +14,10 @@ import json
 from pathlib import Path
 from typing import Any
 
-import torch
-
 from trainer.augment import SampleConfig
 from trainer.builders import add_data_args, eval_loader, real_folder, shard_source
 from trainer.checkpoint import load_checkpoint
+from trainer.device import pick_device
 from trainer.errors import TrainerInputError
 from trainer.metrics import plot_pr_curve
 from trainer.scoring import evaluate, load_model
@@ -55,7 +54,7 @@ def _inherit_depth(args: argparse.Namespace, train_args: dict[str, Any], cfg: Sa
 
 
 def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
-    device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    device = pick_device(args.device)
     model, cfg, train_args = load_model(args.checkpoint, device)
     _inherit_depth(args, train_args, cfg)
     if not args.data and not args.real:

@@ -27,6 +27,7 @@ from fusion.depth.metrics import disparity_metrics
 from fusion.depth.postfilter import FILTERS, STAGES, PostFilter, PostFilterError
 from trainer.checkpoint import load_checkpoint
 from trainer.confidence_cnn import THESIS, ConfidenceCNN
+from trainer.device import pick_device
 from trainer.errors import TrainerInputError
 from trainer.fusion_train import predict_confidence
 from trainer.imageio import read_float_map, read_rgb
@@ -138,7 +139,7 @@ def write_maps(out: Path, maps: dict[str, np.ndarray]) -> list[Path]:
 
 
 def run_fuse(args: argparse.Namespace) -> dict[str, Any]:
-    device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    device = pick_device(args.device)
     model, cfg, _ = load_fusion_model(args.ckpt, device)
     variant = cfg["variant"]
     if variant not in VARIANTS:

@@ -25,6 +25,7 @@ from crackgen.cli_aliases import deprecated_alias
 from fusion.depth.inputs import LIDAR_VARIANTS, OTHER_NAME
 from fusion.depth.metrics import average_metrics, disparity_metrics, format_table
 from fusion.depth.postfilter import PostFilter
+from trainer.device import pick_device
 from trainer.errors import TrainerInputError
 from trainer.fusion_apply import add_stereo_holes_arg, fuse_scene, load_fusion_model
 from trainer.fusion_data import load_shard_scenes, shard_keys
@@ -70,7 +71,7 @@ def evaluate_scene(model, cfg, scene, device, filters: dict[str, PostFilter],
 def run_fusion_eval(args: argparse.Namespace) -> dict[str, Any]:
     if args.threads > 0:
         torch.set_num_threads(args.threads)
-    device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    device = pick_device(args.device)
     model, cfg, ckpt = load_fusion_model(args.ckpt, device)
     if args.real_stereo:
         if cfg["variant"] not in LIDAR_VARIANTS:

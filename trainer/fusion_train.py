@@ -34,6 +34,7 @@ from fusion.depth.inputs import LIDAR_VARIANTS, VARIANTS
 from fusion.depth.metrics import disparity_metrics
 from trainer.checkpoint import load_checkpoint, save_checkpoint
 from trainer.confidence_cnn import DILATIONS, IN_CHANNELS, ConfidenceCNN, receptive_field
+from trainer.device import pick_device
 from trainer.errors import TrainerInputError
 from trainer.fusion_augment import corrupt_scene_stereo, corrupt_stereo
 from trainer.fusion_data import (
@@ -250,7 +251,7 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
     if args.occluders > 0 and (args.other_dir or args.stereo_dir):
         raise TrainerInputError("--occluders re-runs SGBM and re-draws the LiDAR on composited views: it cannot be "
                                 "combined with --stereo-dir or --other-dir")
-    device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    device = pick_device(args.device)
     if device.type == "cuda" and not torch.cuda.is_available():
         raise TrainerInputError("--device cuda but CUDA is not available")
     ckpt = load_checkpoint(args.resume) if args.resume else None

@@ -31,11 +31,11 @@ from typing import Any
 
 import cv2
 import numpy as np
-import torch
 from tqdm import tqdm
 
 from trainer.builders import add_data_args, real_folder
 from trainer.checkpoint import load_checkpoint
+from trainer.device import pick_device
 from trainer.errors import TrainerInputError
 from trainer.evaluate import _inherit_depth
 from trainer.scoring import load_model, predict_probability
@@ -152,7 +152,7 @@ def run_predict(args: argparse.Namespace) -> PredictResult:
             K = load_intrinsics(args.intrinsics)
         except MetricSizeError as exc:
             raise TrainerInputError(str(exc)) from None
-    device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    device = pick_device(args.device)
     model, cfg, train_args = load_model(args.checkpoint, device)
     _inherit_depth(args, train_args, cfg)
     threshold, source = operating_threshold(load_checkpoint(args.checkpoint), args.threshold)

@@ -31,6 +31,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from trainer.device import pick_device
 from trainer.errors import TrainerInputError
 from trainer.imageio import read_rgb
 from trainer.scoring import load_model, predict_probability
@@ -201,7 +202,7 @@ def run_pseudo_label(args: argparse.Namespace) -> dict[str, Any]:
 
     if not Path(args.checkpoint).is_file():
         raise TrainerInputError(f"checkpoint {args.checkpoint} does not exist")
-    device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    device = pick_device(args.device)
     settings = PseudoSettings(teacher=str(args.checkpoint), portion=args.portion,
                               background_portion=args.background_portion, target_bn=args.target_bn,
                               bn_batches=args.batches, batch_size=args.batch_size, crop=args.crop, seed=args.seed)

@@ -73,6 +73,7 @@ from trainer.curve import (
     table_lines,
 )
 from trainer.curve import write_csv as write_curve_csv
+from trainer.device import pick_device
 from trainer.errors import TrainerInputError
 from trainer.eval_sets import DEFAULT_REAL_ROOT, cross_domain_sets
 from trainer.metrics import ConfusionHistogram
@@ -271,7 +272,7 @@ def train_and_score(ns: argparse.Namespace, sets: RealSets, args: argparse.Names
 
 
 def _device(args: argparse.Namespace) -> torch.device:
-    return torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    return pick_device(args.device)
 
 
 # ------------------------------------------------------------------ the rows
