@@ -42,6 +42,6 @@ def test_error_class_inherits_crackgen_error(name):
 
 
 def test_trainer_input_error_is_a_crackgen_error():
-    from trainer.errors import TrainerInputError
+    from trainer.core.errors import TrainerInputError
 
     assert issubclass(TrainerInputError, CrackgenError) and issubclass(TrainerInputError, ValueError)

@@ -14,7 +14,7 @@ from typing import Sequence
 
 from crackgen.cli_aliases import deprecation_note
 from fusion.errors import FusionError
-from trainer.errors import TrainerInputError
+from trainer.core.errors import TrainerInputError
 
 EXIT_BAD_INPUT = 1
 

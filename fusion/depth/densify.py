@@ -13,7 +13,7 @@ Why densify: the confidence CNN and the fusion rules compare two candidate value
 every pixel, but LiDAR (a few % of pixels) and a reprojected low-resolution
 ToF leave holes; ``nearest`` (distance transform) is the cheapest fill and
 also the fallback where no scale reaches a hole. A stronger completion (e.g. PENet) plugs in instead by
-passing its dense map from a file (see ``trainer.fusion_data``).
+passing its dense map from a file (see ``trainer.depthfusion.data``).
 """
 from __future__ import annotations
 

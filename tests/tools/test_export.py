@@ -10,8 +10,8 @@ from synthetic_shards import write_shards
 
 from crackgen.shards import iter_samples
 from crackgen.tools.cli import main
-from trainer.imageio import read_float_map
-from trainer.sources import RealFolder
+from trainer.core.imageio import read_float_map
+from trainer.seg.sources import RealFolder
 
 
 @pytest.fixture(scope="module")

@@ -11,11 +11,11 @@ import pytest
 from real_folders import train_tiny_model, write_real_folder
 
 from trainer.cli import main
-from trainer.errors import TrainerInputError
-from trainer.eval_sets import parse_set
-from trainer.metrics import ConfusionHistogram
-from trainer.scoreboard import EvalSet, ModelEntry, markdown_lines, score_all, summarise, write_csv
-from trainer.sources import RealFolder
+from trainer.core.errors import TrainerInputError
+from trainer.experiments.eval_sets import parse_set
+from trainer.experiments.scoreboard import EvalSet, ModelEntry, markdown_lines, score_all, summarise, write_csv
+from trainer.seg.metrics import ConfusionHistogram
+from trainer.seg.sources import RealFolder
 
 # One 2x4 photo: grey 0 (dark) or 200; the crack label marks two dark pixels and one bright one.
 GREY = np.array([[0, 0, 200, 200], [0, 200, 200, 200]], np.uint8)
@@ -150,7 +150,7 @@ def test_a_model_is_refused_on_photos_of_groups_it_trained_on(tiny, tmp_path, ca
 def test_seg_stores_the_validation_threshold_and_predict_uses_it(tmp_path):
     import json
 
-    from trainer.checkpoint import load_checkpoint
+    from trainer.core.checkpoint import load_checkpoint
 
     real, val = write_real_folder(tmp_path / "r", n=8), write_real_folder(tmp_path / "v", n=3)
     run = tmp_path / "run"
@@ -168,7 +168,7 @@ def test_seg_stores_the_validation_threshold_and_predict_uses_it(tmp_path):
 
 
 def test_seg_val_fraction_on_real_data_keeps_groups_whole(tmp_path):
-    from trainer.real_split import read_split
+    from trainer.seg.real_split import read_split
 
     root = tmp_path / "tiles"
     write_real_folder(root, n=12)

@@ -3,8 +3,8 @@ import argparse
 
 import torch
 
-from trainer.bn_adapt import precise_bn
-from trainer.train import precise_bn_batches
+from trainer.seg.precise_bn import precise_bn
+from trainer.seg.train import precise_bn_batches
 
 
 def _batches(n, mean, std, seed=0):

@@ -1,9 +1,9 @@
 """Label-efficiency curve: nested, seeded subsets from the training split; headline arithmetic."""
 import pytest
 
-from trainer.curve import CurvePoint, headline, labels_to_match, nested_subsets, parse_sizes, summarise
-from trainer.errors import TrainerInputError
-from trainer.sources import split_fraction
+from trainer.core.errors import TrainerInputError
+from trainer.core.holdout import split_fraction
+from trainer.experiments.curve import CurvePoint, headline, labels_to_match, nested_subsets, parse_sizes, summarise
 
 
 def test_subsets_nested_seeded_and_disjoint_from_test():
@@ -45,7 +45,7 @@ def test_labels_to_match_and_headline():
 
 
 def test_csv_round_trip_keeps_every_field(tmp_path):
-    from trainer.curve import read_csv, write_csv
+    from trainer.experiments.curve import read_csv, write_csv
 
     pts = [_pt(10, "real", 0.31, 0), _pt(30, "finetune", 0.625, 2)]
     write_csv(pts, tmp_path / "curve.csv")
@@ -59,7 +59,7 @@ def test_csv_round_trip_keeps_every_field(tmp_path):
 def test_curve_continues_only_with_the_same_settings(tmp_path):
     import argparse
 
-    from trainer.sim2real import add_curve_args, check_curve_settings
+    from trainer.experiments.sim2real import add_curve_args, check_curve_settings
 
     p = argparse.ArgumentParser()
     add_curve_args(p)
@@ -83,7 +83,7 @@ def test_train_or_reuse_keeps_finished_and_resumes_interrupted(tmp_path, monkeyp
 
     import torch
 
-    import trainer.sim2real as s2r
+    import trainer.experiments.sim2real as s2r
 
     calls = []
     monkeypatch.setattr(s2r, "train_seg", lambda ns: calls.append(ns.resume) or {"step": ns.max_steps, "seconds": 1.0})

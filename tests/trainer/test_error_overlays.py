@@ -2,8 +2,8 @@
 import cv2
 import numpy as np
 
-from trainer.error_overlays import component_shapes, describe_errors, error_overlay
-from trainer.sources import RealFolder
+from trainer.experiments.error_overlays import component_shapes, describe_errors, error_overlay
+from trainer.seg.sources import RealFolder
 
 
 def test_false_positives_are_counted_and_described(tmp_path):

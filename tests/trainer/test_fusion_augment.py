@@ -6,7 +6,7 @@ import pytest
 
 from fusion.depth.confidence import confidence_target
 from trainer.cli import main as cli_main
-from trainer.fusion_augment import FAILURE_KINDS, corrupt_stereo
+from trainer.depthfusion.augment import FAILURE_KINDS, corrupt_stereo
 
 
 def _patch(size: int = 48) -> np.ndarray:

@@ -18,10 +18,10 @@ from fusion_samples import fusion_sample, write_fusion_shards  # tests/ helper
 from crackgen.shards import ShardWriter, sample_key
 from trainer.cli import build_parser
 from trainer.cli import main as cli_main
-from trainer.confidence_cnn import ConfidenceCNN
-from trainer.errors import TrainerInputError
-from trainer.fusion_data import FusionScene, load_shard_scenes, random_patch
-from trainer.fusion_train import make_batch, masked_mse
+from trainer.core.errors import TrainerInputError
+from trainer.depthfusion.data import FusionScene, load_shard_scenes, random_patch
+from trainer.depthfusion.model import ConfidenceCNN
+from trainer.depthfusion.train import make_batch, masked_mse
 
 
 @pytest.fixture(scope="module")
@@ -84,7 +84,7 @@ def test_a_few_training_steps_reduce_the_loss_then_eval_and_fuse(fusion_shards, 
               "--optimizer", "adam", "--lr", "0.003", "--no-progress", "--out", str(out)]
     args = _args(["fusion", *common, "--max-steps", "12"])
     scenes = load_shard_scenes(fusion_shards, "tof", progress=False)
-    from trainer.fusion_data import channel_stats
+    from trainer.depthfusion.data import channel_stats
 
     mean, std = channel_stats(scenes)
     x, t = make_batch(scenes, args, 10_000, mean, std)  # a fixed batch no training step draws
@@ -127,8 +127,8 @@ def test_a_few_training_steps_reduce_the_loss_then_eval_and_fuse(fusion_shards, 
 
 
 def test_median_disparity_reference_makes_the_input_shift_free(fusion_shards, tmp_path, capsys):
-    from trainer.fusion_data import channel_stats, disparity_reference, relative_input
-    from trainer.fusion_train import predict_confidence
+    from trainer.depthfusion.data import channel_stats, disparity_reference, relative_input
+    from trainer.depthfusion.train import predict_confidence
 
     scene = load_shard_scenes(fusion_shards, "lidar", progress=False)[0]
     shifted = scene.x.copy()
@@ -161,7 +161,7 @@ REAL_CONES = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "r
 
 @pytest.mark.skipif(not REAL_CONES.is_dir(), reason="../shared/data/real is absent")
 def test_real_stereo_scene_has_lidar_inputs_and_gt():
-    from trainer.fusion_real import real_scene
+    from trainer.depthfusion.real_scenes import real_scene
 
     args = argparse.Namespace(lidar_lines=16, lidar_sigma_px=0.25, lidar_dropout=0.1, seed=0)
     s = real_scene(REAL_CONES, args, "normconv")
@@ -177,7 +177,7 @@ def test_skimage_motorcycle_is_a_real_stereo_scene_with_gt():
     """scikit-image's bundled Middlebury 2014 pair loads without files here, and its GT is a disparity: the
     left view matches the right view shifted by it."""
     from fusion.geometry.real_data import load_skimage_motorcycle
-    from trainer.fusion_real import real_scene
+    from trainer.depthfusion.real_scenes import real_scene
 
     s = load_skimage_motorcycle()
     gt, left, right = s["disp_left"], s["left"].astype(np.float32), s["right"].astype(np.float32)
@@ -199,7 +199,7 @@ def test_skimage_motorcycle_is_a_real_stereo_scene_with_gt():
 
 def test_filled_stereo_holes_take_the_other_sensor_unless_asked(fusion_shards):
     from fusion.depth.inputs import build_inputs
-    from trainer.fusion_apply import fuse_scene
+    from trainer.depthfusion.apply import fuse_scene
 
     smp = fusion_sample(np.random.default_rng(5))
     stereo = smp["disp_sgm.exr"].copy()

@@ -7,9 +7,9 @@ import torch
 from fusion_samples import write_fusion_shards
 
 from trainer.cli import main as cli_main
-from trainer.confidence_cnn import THESIS, WIDE, ConfidenceCNN, receptive_field
-from trainer.errors import TrainerInputError
-from trainer.fusion_apply import load_fusion_model
+from trainer.core.errors import TrainerInputError
+from trainer.depthfusion.apply import load_fusion_model
+from trainer.depthfusion.model import THESIS, WIDE, ConfidenceCNN, receptive_field
 
 
 @pytest.mark.parametrize("dilations,side", [(THESIS, 15), (WIDE, 43)])

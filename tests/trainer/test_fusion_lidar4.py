@@ -14,8 +14,8 @@ from fusion_samples import write_fusion_shards
 from fusion.depth.inputs import build_inputs
 from fusion.geometry.stereo import left_right_difference
 from trainer.cli import main as cli_main
-from trainer.fusion_augment import corrupt_scene_stereo
-from trainer.fusion_data import load_shard_scenes
+from trainer.depthfusion.augment import corrupt_scene_stereo
+from trainer.depthfusion.data import load_shard_scenes
 
 D = 8.0  # the true disparity of the hand-made pair
 

@@ -21,10 +21,10 @@ from fusion.depth.metrics import disparity_metrics
 from fusion.depth.postfilter import bm3d_disparity
 from fusion.geometry.stereo import left_right_difference
 from trainer.cli import main as cli_main
-from trainer.errors import TrainerInputError
-from trainer.fusion_data import load_shard_scenes
-from trainer.fusion_train import add_fusion_args
-from trainer.fusion_train import main as fusion_main
+from trainer.core.errors import TrainerInputError
+from trainer.depthfusion.data import load_shard_scenes
+from trainer.depthfusion.train import add_fusion_args
+from trainer.depthfusion.train import main as fusion_main
 
 D = 8.0
 

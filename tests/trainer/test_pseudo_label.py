@@ -8,13 +8,13 @@ import torch
 from real_folders import train_tiny_model, write_real_folder
 from synthetic_shards import write_shards
 
-from trainer.augment import SampleConfig, sample_generator, sample_to_tensors
-from trainer.checkpoint import load_checkpoint
+from trainer.adapt.pseudo_label import RECORD, PseudoSettings, class_thresholds, label_maps, write_pseudo_folder
 from trainer.cli import main
-from trainer.errors import TrainerInputError
-from trainer.losses import LOSSES, make_loss
-from trainer.pseudo_label import RECORD, PseudoSettings, class_thresholds, label_maps, write_pseudo_folder
-from trainer.sources import RealFolder
+from trainer.core.checkpoint import load_checkpoint
+from trainer.core.errors import TrainerInputError
+from trainer.seg.augment import SampleConfig, sample_generator, sample_to_tensors
+from trainer.seg.losses import LOSSES, make_loss
+from trainer.seg.sources import RealFolder
 
 CPU = torch.device("cpu")
 

@@ -3,8 +3,8 @@ from pathlib import Path
 
 import pytest
 
-from trainer.errors import TrainerInputError
-from trainer.real_split import compile_group_pattern, group_of, read_split, split_groups
+from trainer.core.errors import TrainerInputError
+from trainer.seg.real_split import compile_group_pattern, group_of, read_split, split_groups
 
 DEEPCRACK = Path(__file__).resolve().parents[3] / "shared" / "data" / "real" / "deepcrack_train" / "images"
 

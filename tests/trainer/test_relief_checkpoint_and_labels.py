@@ -11,12 +11,12 @@ import torch
 from real_folders import write_real_folder
 from synthetic_shards import write_shards
 
-from trainer.augment import SampleConfig, sample_to_tensors
 from trainer.cli import main
-from trainer.depth import normalise_depth
-from trainer.errors import TrainerInputError
-from trainer.scoring import load_model
-from trainer.sources import ShardSource
+from trainer.core.errors import TrainerInputError
+from trainer.seg.augment import SampleConfig, sample_to_tensors
+from trainer.seg.depth import normalise_depth
+from trainer.seg.scoring import load_model
+from trainer.seg.sources import ShardSource
 
 
 def _thesis_mask(s: dict) -> np.ndarray:

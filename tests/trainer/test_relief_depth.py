@@ -4,8 +4,8 @@ import argparse
 import numpy as np
 import pytest
 
-from trainer.builders import add_data_args, channels_from_args
-from trainer.depth import normalise_depth, relief_mm
+from trainer.seg.builders import add_data_args, channels_from_args
+from trainer.seg.depth import normalise_depth, relief_mm
 
 H, W, F = 96, 128, 150.0  # image size and focal length (px) of the hand-made camera
 GROOVE_M = 0.010

@@ -7,12 +7,12 @@ import torch
 from real_folders import write_real_folder
 from synthetic_shards import write_shards
 
-from trainer.augment import SampleConfig
-from trainer.checkpoint import load_checkpoint
 from trainer.cli import main
-from trainer.site_adapt import SiteAdaptation
-from trainer.sources import RealFolder, ShardSource
-from trainer.stream import SegStream
+from trainer.core.checkpoint import load_checkpoint
+from trainer.seg.appearance import SiteAdaptation
+from trainer.seg.augment import SampleConfig
+from trainer.seg.sources import RealFolder, ShardSource
+from trainer.seg.stream import SegStream
 
 
 @pytest.fixture(scope="module")
@@ -206,7 +206,7 @@ def test_the_threshold_is_chosen_without_test_labels(tmp_path):
     same chosen threshold; only the test scores differ (so the test labels were read, but only to score)."""
     import cv2
 
-    from trainer.real_split import read_split
+    from trainer.seg.real_split import read_split
 
     runs = {}
     for name in ("plain", "flipped"):

@@ -9,14 +9,14 @@ import torch
 from real_folders import train_tiny_model
 from synthetic_shards import write_shards
 
-from trainer.adapt_bn import adapt_checkpoint
-from trainer.augment import SampleConfig
-from trainer.checkpoint import load_checkpoint
+from trainer.adapt.adabn import adapt_checkpoint
 from trainer.cli import main
-from trainer.errors import TrainerInputError
-from trainer.models import build_model
-from trainer.scoring import load_model
-from trainer.target_bn import PhotoCrops, adapt_bn_to_photos, photo_crop_config
+from trainer.core.checkpoint import load_checkpoint
+from trainer.core.errors import TrainerInputError
+from trainer.seg.augment import SampleConfig
+from trainer.seg.models import build_model
+from trainer.seg.scoring import load_model
+from trainer.seg.target_bn import PhotoCrops, adapt_bn_to_photos, photo_crop_config
 
 CPU = torch.device("cpu")
 

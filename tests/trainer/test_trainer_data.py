@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 import torch
 
-from trainer.augment import RGB_MEAN, RGB_STD, SampleConfig, sample_generator, sample_to_tensors
-from trainer.depth import align_to_rgb, disparity_to_depth, normalise_depth
-from trainer.errors import TrainerInputError
-from trainer.imageio import read_float_map
-from trainer.sources import RealFolder, split_fraction
-from trainer.stream import SegStream, mix_repeat
+from trainer.core.errors import TrainerInputError
+from trainer.core.holdout import split_fraction
+from trainer.core.imageio import read_float_map
+from trainer.seg.augment import RGB_MEAN, RGB_STD, SampleConfig, sample_generator, sample_to_tensors
+from trainer.seg.depth import align_to_rgb, disparity_to_depth, normalise_depth
+from trainer.seg.sources import RealFolder
+from trainer.seg.stream import SegStream, mix_repeat
 
 REAL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real"
 
@@ -37,7 +38,7 @@ def test_split_folder_keeps_the_stem_order_of_the_same_stems_in_the_whole_folder
     """'a.png' sorts after 'a-1.png' by file name but before it by stem: both ways of naming a
     training split must list (and so draw) its samples in one order."""
 
-    from trainer.split import run_split
+    from trainer.experiments.split import run_split
 
     src = tmp_path / "src"
     (src / "images").mkdir(parents=True)

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import torch
 
-from trainer.metrics import ConfusionHistogram, plot_pr_curve, scores
+from trainer.seg.metrics import ConfusionHistogram, plot_pr_curve, scores
 
 
 def test_confusion_summed_over_images_matches_hand_count():

@@ -2,8 +2,8 @@
 import pytest
 import torch
 
-from trainer.losses import LOSSES, make_loss
-from trainer.models import build_model
+from trainer.seg.losses import LOSSES, make_loss
+from trainer.seg.models import build_model
 
 CASES = [(a, c) for a in ("lraspp_mobilenet_v3_large", "deeplabv3_mobilenet_v3_large", "unet") for c in (3, 4, 5)]
 CASES.append(("deeplabv3_resnet50", 4))  # the thesis model, once (RGB-D)

@@ -5,10 +5,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from trainer.augment import SampleConfig
-from trainer.checkpoint import save_checkpoint
 from trainer.cli import main
-from trainer.models import build_model
+from trainer.core.checkpoint import save_checkpoint
+from trainer.seg.augment import SampleConfig
+from trainer.seg.models import build_model
 
 
 def _untrained_checkpoint(path: Path) -> Path:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 
 from crackgen.cli_aliases import deprecation_note
-from trainer.errors import TrainerInputError
+from trainer.core.errors import TrainerInputError
 
 
 def resolve_checkpoint(args: argparse.Namespace, command: str) -> str:

@@ -10,13 +10,13 @@ HELP = "move a trained model's BatchNorm statistics to a folder of unlabeled sit
 
 
 def add_args(p: argparse.ArgumentParser) -> None:
-    from trainer.adapt_bn import add_adapt_bn_args
+    from trainer.adapt.adabn import add_adapt_bn_args
 
     add_adapt_bn_args(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from trainer.adapt_bn import run_adapt_bn
+    from trainer.adapt.adabn import run_adapt_bn
 
     resolve_checkpoint(args, NAME)
     r = run_adapt_bn(args)

@@ -9,13 +9,13 @@ HELP = "loader samples/s and model step time"
 
 
 def add_args(p: argparse.ArgumentParser) -> None:
-    from trainer.bench import add_bench_args
+    from trainer.experiments.bench import add_bench_args
 
     add_bench_args(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from trainer.bench import format_bench, run_bench
+    from trainer.experiments.bench import format_bench, run_bench
 
     res = run_bench(args)
     print(json.dumps(res, indent=2) if args.json else format_bench(res))

@@ -9,13 +9,13 @@ HELP = "score models on DeepCrack's test split and the cross-domain sets at thei
 
 
 def add_args(p: argparse.ArgumentParser) -> None:
-    from trainer.benchmark import add_benchmark_args
+    from trainer.experiments.benchmark import add_benchmark_args
 
     add_benchmark_args(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from trainer.benchmark import run_benchmark
+    from trainer.experiments.benchmark import run_benchmark
 
     r = run_benchmark(args)
     print(Path(r["out"], "benchmark.md").read_text())

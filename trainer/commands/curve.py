@@ -9,13 +9,13 @@ HELP = "label-efficiency curve: real-only vs synthetic -> fine-tune on N labelle
 
 
 def add_args(p: argparse.ArgumentParser) -> None:
-    from trainer.sim2real import add_curve_args
+    from trainer.experiments.sim2real import add_curve_args
 
     add_curve_args(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from trainer.sim2real import run_curve
+    from trainer.experiments.sim2real import run_curve
 
     res = run_curve(args)
     report = Path(res["out"]) / "curve.md"

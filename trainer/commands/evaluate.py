@@ -8,13 +8,13 @@ HELP = "dataset-level metrics + PR curve of a checkpoint"
 
 
 def add_args(p: argparse.ArgumentParser) -> None:
-    from trainer.evaluate import add_eval_args
+    from trainer.seg.evaluate import add_eval_args
 
     add_eval_args(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from trainer.evaluate import run_evaluate
+    from trainer.seg.evaluate import run_evaluate
 
     s = run_evaluate(args)
     a, b = s["at_threshold"], s["best"]

@@ -8,13 +8,13 @@ HELP = "train the ToF/LiDAR-stereo confidence CNN (thesis: Adadelta 0.01, batch 
 
 
 def add_args(p: argparse.ArgumentParser) -> None:
-    from trainer.fusion_train import add_fusion_args
+    from trainer.depthfusion.train import add_fusion_args
 
     add_fusion_args(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from trainer.fusion_train import main as fusion_main
+    from trainer.depthfusion.train import main as fusion_main
 
     res = fusion_main(args)
     b = res["best"]

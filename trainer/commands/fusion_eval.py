@@ -3,20 +3,20 @@ from __future__ import annotations
 
 import argparse
 
-from trainer.errors import TrainerInputError
+from trainer.core.errors import TrainerInputError
 
 NAME = "fusion-eval"
 HELP = "thesis-style table: stereo, ToF/LiDAR, fused max/weighted, + BM3D"
 
 
 def add_args(p: argparse.ArgumentParser) -> None:
-    from trainer.fusion_eval import add_fusion_eval_args
+    from trainer.depthfusion.evaluate import add_fusion_eval_args
 
     add_fusion_eval_args(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from trainer.fusion_eval import run_fusion_eval
+    from trainer.depthfusion.evaluate import run_fusion_eval
 
     if args.ckpt is None:
         raise TrainerInputError("--checkpoint is required")

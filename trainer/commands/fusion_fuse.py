@@ -3,21 +3,21 @@ from __future__ import annotations
 
 import argparse
 
-from trainer.errors import TrainerInputError
+from trainer.core.errors import TrainerInputError
 
 NAME = "fuse"
 HELP = "fuse a stereo and a ToF/LiDAR disparity file with a trained confidence CNN"
 
 
 def add_args(p: argparse.ArgumentParser) -> None:
-    from trainer.fusion_apply import add_fuse_args
+    from trainer.depthfusion.apply import add_fuse_args
 
     add_fuse_args(p)
 
 
 def run(args: argparse.Namespace) -> int:
     from fusion.depth.metrics import format_table
-    from trainer.fusion_apply import run_fuse
+    from trainer.depthfusion.apply import run_fuse
 
     if args.ckpt is None:
         raise TrainerInputError("--checkpoint is required")

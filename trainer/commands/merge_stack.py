@@ -9,13 +9,13 @@ HELP = "guided-filter fusion of an exposure or focus stack; prints Q_Y, Q_C, Q_G
 
 
 def add_args(p: argparse.ArgumentParser) -> None:
-    from trainer.fuse_images import add_fuse_args
+    from trainer.imagefusion.stack import add_fuse_args
 
     add_fuse_args(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from trainer.fuse_images import run_fuse
+    from trainer.imagefusion.stack import run_fuse
 
     r = run_fuse(args)
     print(f"Q_Y {r['Q_Y']:.4f}  Q_C {r['Q_C']:.4f}  Q_G {r['Q_G']:.4f}  Q_MI {r['Q_MI']:.4f}")

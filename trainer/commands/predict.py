@@ -8,13 +8,13 @@ HELP = "masks, overlays and crack length/width (px or metres) for real photos"
 
 
 def add_args(p: argparse.ArgumentParser) -> None:
-    from trainer.predict import add_predict_args
+    from trainer.seg.predict import add_predict_args
 
     add_predict_args(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from trainer.predict import run_predict
+    from trainer.seg.predict import run_predict
 
     print(run_predict(args).summary())
     return 0

@@ -10,13 +10,13 @@ HELP = "label a folder of unlabeled site photos with a model's confident predict
 
 
 def add_args(p: argparse.ArgumentParser) -> None:
-    from trainer.pseudo_label import add_pseudo_label_args
+    from trainer.adapt.pseudo_label import add_pseudo_label_args
 
     add_pseudo_label_args(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from trainer.pseudo_label import run_pseudo_label
+    from trainer.adapt.pseudo_label import run_pseudo_label
 
     resolve_checkpoint(args, NAME)
     r = run_pseudo_label(args)

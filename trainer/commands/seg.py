@@ -9,7 +9,7 @@ HELP = "train a segmentation model (thesis defaults: DeepLabV3-R50, Adam 1e-4, b
 
 
 def add_args(p: argparse.ArgumentParser) -> None:
-    from trainer.train import add_seg_args
+    from trainer.seg.train import add_seg_args
 
     add_seg_args(p)
 
@@ -17,7 +17,7 @@ def add_args(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import torch.distributed as dist
 
-    from trainer.train import main as train_main
+    from trainer.seg.train import main as train_main
 
     res = train_main(args)
     distributed = dist.is_available() and dist.is_initialized()

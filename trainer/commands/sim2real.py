@@ -11,13 +11,13 @@ HELP = "synthetic (+ adaptation) vs real vs mixed vs fine-tune on a grouped real
 
 
 def add_args(p: argparse.ArgumentParser) -> None:
-    from trainer.sim2real import add_sim2real_args
+    from trainer.experiments.sim2real import add_sim2real_args
 
     add_sim2real_args(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from trainer.sim2real import run_curve, run_sim2real
+    from trainer.experiments.sim2real import run_curve, run_sim2real
 
     if args.curve:  # the old spelling of `cracktrain curve`
         deprecation_note("cracktrain", "sim2real --curve", "cracktrain curve --sizes")

@@ -8,13 +8,13 @@ HELP = "grouped, seeded train / validation / test split of a real folder"
 
 
 def add_args(p: argparse.ArgumentParser) -> None:
-    from trainer.split import add_split_command_args
+    from trainer.experiments.split import add_split_command_args
 
     add_split_command_args(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from trainer.split import run_split
+    from trainer.experiments.split import run_split
 
     s = run_split(args.source, args.out, val_fraction=args.val_fraction, test_fraction=args.test_fraction,
                   seed=args.split_seed, group_pattern=args.group_pattern, image_dir=args.image_dir,

@@ -1,0 +1,1 @@
+"""What every part of the trainer shares: errors, checkpoints, image I/O, the device rule, seeded hold-outs."""

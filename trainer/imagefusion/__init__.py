@@ -1,0 +1,1 @@
+"""Guided-filter fusion of exposure and focus stacks, as a command."""

@@ -1,0 +1,1 @@
+"""Crack segmentation: data (shards, real folders, depth input, augmentation, appearance transfer), models, losses, training with precise and target BatchNorm, scoring, thresholds, evaluation and prediction."""
