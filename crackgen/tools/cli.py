@@ -236,12 +236,8 @@ def _cmd_measure_check(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _add_generate(sub: argparse._SubParsersAction) -> None:
     from crackgen.datagen.backends import BACKENDS  # the --backend choices (registry keys)
-
-    p = argparse.ArgumentParser(prog="crackgen", description="Synthetic RGB-D crack datasets from headless Blender.")
-    p.add_argument("--version", action="version", version=f"crackgen {__version__}")
-    sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     g = sub.add_parser("generate", help="render a dataset of shards from a recipe")
     g.add_argument("recipe")
@@ -261,17 +257,23 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--json", action="store_true", help="print the summary as JSON")
     g.set_defaults(func=_cmd_generate)
 
+
+def _add_validate(sub: argparse._SubParsersAction) -> None:
     v = sub.add_parser("validate", help="check a recipe and print its summary")
     v.add_argument("recipe")
     v.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=SET_HELP)
     v.set_defaults(func=_cmd_validate)
 
+
+def _add_inspect(sub: argparse._SubParsersAction) -> None:
     i = sub.add_parser("inspect", help="write an HTML gallery DIR/inspect/index.html and a contact sheet")
     i.add_argument("dir")
     i.add_argument("--page-size", type=int, default=24, help="samples per gallery page")
     i.add_argument("--limit", type=int, default=None, help="at most this many samples")
     i.set_defaults(func=_cmd_inspect)
 
+
+def _add_bench(sub: argparse._SubParsersAction) -> None:
     b = sub.add_parser("bench", help="per-stage timing table of the sample pipeline, or of one component")
     b.add_argument("recipe", nargs="?", default=None)
     b.add_argument("--component", choices=BENCH_COMPONENTS, default=None,
@@ -297,6 +299,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--out", default="bench_sweep", help="sweep: folder for sweep.csv, sweep.json, sweep.md")
     b.set_defaults(func=_cmd_bench)
 
+
+def _add_show(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("show", help="coloured point cloud (and a PNG view) of one sample")
     s.add_argument("dir")
     s.add_argument("key", help="sample key, e.g. 000000-00001")
@@ -305,11 +309,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--depth", choices=("depth", "tof", "lidar"), default="depth", help="which depth map to lift")
     s.set_defaults(func=_cmd_show)
 
+
+def _add_verify(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("verify", help="check every shard against the manifest (size, sha256, decodes)")
     c.add_argument("dir")
     c.add_argument("--quick", action="store_true", help="size and sha256 only, do not decode members")
     c.set_defaults(func=_cmd_verify)
 
+
+def _add_export(sub: argparse._SubParsersAction) -> None:
     e = sub.add_parser("export", help="images/ + masks/ (+ depth/, tof/, lidar/) folders for other tools")
     e.add_argument("dir")
     e.add_argument("--to", required=True, help="output folder (must be new or empty)")
@@ -319,6 +327,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--no-progress", action="store_true", help="no progress bar")
     e.set_defaults(func=_cmd_export)
 
+
+def _add_adapt(sub: argparse._SubParsersAction) -> None:
     a = sub.add_parser("adapt", help="adapt the RGB views of rendered shards toward unlabeled photos (new shards)")
     a.add_argument("shards", help="source dataset directory (a finished crackgen dataset)")
     a.add_argument("--target", required=True, help="folder of unlabeled target photos")
@@ -333,6 +343,8 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--no-progress", action="store_true", help="no progress bar")
     a.set_defaults(func=_cmd_adapt)
 
+
+def _add_stats(sub: argparse._SubParsersAction) -> None:
     st = sub.add_parser("stats", help="crack width, pixel fraction, components and image statistics "
                                       "of shards or an images/ + masks/ folder")
     st.add_argument("path", metavar="DIR|FOLDER", nargs="+",
@@ -343,6 +355,8 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--no-progress", action="store_true", help="no progress bar")
     st.set_defaults(func=_cmd_stats)
 
+
+def _add_measure_check(sub: argparse._SubParsersAction) -> None:
     mc = sub.add_parser("measure-check", help="crack length/width measured from each rendered mask + depth + K "
                                               "against the sample's 'visible' GT: median and p90 relative error")
     mc.add_argument("path", metavar="DIR", help="a crackgen dataset (e.g. made from recipes/measure.toml)")
@@ -352,6 +366,15 @@ def build_parser() -> argparse.ArgumentParser:
     mc.add_argument("--limit", type=int, default=None, help="at most this many samples")
     mc.add_argument("--no-progress", action="store_true", help="no progress bar")
     mc.set_defaults(func=_cmd_measure_check)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="crackgen", description="Synthetic RGB-D crack datasets from headless Blender.")
+    p.add_argument("--version", action="version", version=f"crackgen {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for add in (_add_generate, _add_validate, _add_inspect, _add_bench, _add_show, _add_verify, _add_export,
+                _add_adapt, _add_stats, _add_measure_check):
+        add(sub)
     return p
 
 
