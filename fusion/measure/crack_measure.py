@@ -252,6 +252,75 @@ def _degrees(skel: np.ndarray, shape: tuple[int, int], g=None) -> np.ndarray:
     return out
 
 
+def _tip_extensions(m: np.ndarray, pts, rows: np.ndarray, cols: np.ndarray, deg: np.ndarray, tangent: np.ndarray,
+                    inward: np.ndarray, t_max: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Free ends extended along the tangent to the last mask pixel ahead (the skeleton stops short of the tip).
+
+    Returns (is_tip per skeleton pixel, indices of the tips, extension length per skeleton pixel).
+    """
+    is_tip = deg[rows, cols] <= 1
+    tip_dir = tangent.copy()
+    flip = (tip_dir * inward).sum(axis=1) > 0  # point away from the skeleton behind the tip
+    tip_dir[flip] *= -1
+    isolated = deg[rows, cols] == 0
+    ext_px = np.zeros(rows.size)
+    sel = np.nonzero(is_tip)[0]
+    ext_px[sel] = np.maximum(_exit_distance(m, rows[sel], cols[sel], tip_dir[sel], t_max) - 0.5, 0.0)
+    ext = np.zeros(rows.size)
+    end_r, end_c = rows[sel] + ext_px[sel] * tip_dir[sel, 0], cols[sel] + ext_px[sel] * tip_dir[sel, 1]
+    ext[sel] = np.nan_to_num(_dist(pts, rows[sel].astype(float), cols[sel].astype(float), end_r, end_c))
+    if isolated.any():  # a lone skeleton pixel: the blob's extent both ways along its long axis
+        iso = np.nonzero(isolated)[0]
+        back = np.maximum(_exit_distance(m, rows[iso], cols[iso], -tip_dir[iso], t_max) - 0.5, 0.0)
+        ext[iso] += np.nan_to_num(_dist(pts, rows[iso].astype(float), cols[iso].astype(float),
+                                        rows[iso] - back * tip_dir[iso, 0], cols[iso] - back * tip_dir[iso, 1]))
+    return is_tip, sel, ext
+
+
+def _local_widths(m: np.ndarray, pts, skel: np.ndarray, rows: np.ndarray, cols: np.ndarray, tangent: np.ndarray,
+                  t_max: float) -> np.ndarray:
+    """Width across the crack at every skeleton pixel: edge to edge along the normal, perpendicular to the
+    crack in 3-D (on a foreshortened surface the image normal is not), averaged over 5 x 5 skeleton neighbours."""
+    normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
+    t_pos = _exit_distance(m, rows, cols, normal, t_max)
+    t_neg = _exit_distance(m, rows, cols, -normal, t_max)
+    across = (_sample(pts, rows + t_pos * normal[:, 0], cols + t_pos * normal[:, 1])
+              - _sample(pts, rows - t_neg * normal[:, 0], cols - t_neg * normal[:, 1]))
+    along = (_sample(pts, rows + tangent[:, 0], cols + tangent[:, 1])
+             - _sample(pts, rows - tangent[:, 0], cols - tangent[:, 1]))
+    along /= np.maximum(np.linalg.norm(along, axis=1, keepdims=True), 1e-300)
+    width = np.linalg.norm(across - (across * along).sum(axis=1, keepdims=True) * along, axis=1)
+    return _window_mean(skel, rows, cols, width)
+
+
+def _near_junction(deg: np.ndarray, dt: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """Skeleton pixels close enough to a junction that the width there spans two branches."""
+    junction = deg >= 3
+    if not junction.any():
+        return np.zeros(rows.size, bool)
+    jr, jc = np.nonzero(junction)
+    d_j, _ = cKDTree(np.stack([jr, jc], axis=1)).query(np.stack([rows, cols], axis=1))
+    return d_j < 2.0 * dt[rows, cols] + 1.0
+
+
+def _summary(out: list[ComponentMeasurement]) -> CrackMeasurement:
+    """The image's figures from its kept components, longest first."""
+    out = sorted(out, key=lambda c: c.tip_to_tip, reverse=True)
+    if not out:
+        return CrackMeasurement(0.0, 0.0, 0.0, float("nan"), float("nan"), [])
+    total = float(sum(c.total_length for c in out))
+    area = float(sum(c.area for c in out))
+    widths = [c.max_width for c in out if np.isfinite(c.max_width)]
+    return CrackMeasurement(
+        longest_path=out[0].tip_to_tip,
+        tip_to_tip_sum=float(sum(c.tip_to_tip for c in out)),
+        total_length=total,
+        mean_width=area / total if total > 0 else float("nan"),
+        max_width=max(widths) if widths else float("nan"),
+        components=out,
+    )
+
+
 def measure_cracks(
     mask: np.ndarray,
     coords: float | np.ndarray | None = None,
@@ -281,43 +350,9 @@ def measure_cracks(
     tangent, inward = _directions(skel, rows, cols)
     t_max = 2.0 * float(dt.max()) + 2.0
 
-    # Free ends: extend along the tangent, pointing away from the skeleton behind the tip.
-    is_tip = deg[rows, cols] <= 1
-    tip_dir = tangent.copy()
-    flip = (tip_dir * inward).sum(axis=1) > 0
-    tip_dir[flip] *= -1
-    isolated = deg[rows, cols] == 0
-    ext_px = np.zeros(rows.size)
-    sel = np.nonzero(is_tip)[0]
-    ext_px[sel] = np.maximum(_exit_distance(m, rows[sel], cols[sel], tip_dir[sel], t_max) - 0.5, 0.0)
-    ext = np.zeros(rows.size)
-    end_r, end_c = rows[sel] + ext_px[sel] * tip_dir[sel, 0], cols[sel] + ext_px[sel] * tip_dir[sel, 1]
-    ext[sel] = np.nan_to_num(_dist(pts, rows[sel].astype(float), cols[sel].astype(float), end_r, end_c))
-    if isolated.any():  # a lone skeleton pixel: the blob's extent both ways along its long axis
-        iso = np.nonzero(isolated)[0]
-        back = np.maximum(_exit_distance(m, rows[iso], cols[iso], -tip_dir[iso], t_max) - 0.5, 0.0)
-        ext[iso] += np.nan_to_num(_dist(pts, rows[iso].astype(float), cols[iso].astype(float),
-                                        rows[iso] - back * tip_dir[iso, 0], cols[iso] - back * tip_dir[iso, 1]))
-
-    # Local width across the crack: edge to edge along the normal.
-    normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
-    t_pos = _exit_distance(m, rows, cols, normal, t_max)
-    t_neg = _exit_distance(m, rows, cols, -normal, t_max)
-    across = (_sample(pts, rows + t_pos * normal[:, 0], cols + t_pos * normal[:, 1])
-              - _sample(pts, rows - t_neg * normal[:, 0], cols - t_neg * normal[:, 1]))
-    # Perpendicular to the crack in 3-D: on a foreshortened surface the image normal is not.
-    along = (_sample(pts, rows + tangent[:, 0], cols + tangent[:, 1])
-             - _sample(pts, rows - tangent[:, 0], cols - tangent[:, 1]))
-    along /= np.maximum(np.linalg.norm(along, axis=1, keepdims=True), 1e-300)
-    width = np.linalg.norm(across - (across * along).sum(axis=1, keepdims=True) * along, axis=1)
-    width = _window_mean(skel, rows, cols, width)
-    junction = deg >= 3
-    if junction.any():
-        jr, jc = np.nonzero(junction)
-        d_j, _ = cKDTree(np.stack([jr, jc], axis=1)).query(np.stack([rows, cols], axis=1))
-        near_j = d_j < 2.0 * dt[rows, cols] + 1.0
-    else:
-        near_j = np.zeros(rows.size, bool)
+    is_tip, sel, ext = _tip_extensions(m, pts, rows, cols, deg, tangent, inward, t_max)
+    width = _local_widths(m, pts, skel, rows, cols, tangent, t_max)
+    near_j = _near_junction(deg, dt, rows, cols)
 
     # Skeleton component of every skeleton pixel, and each mask component's area.
     index = np.full(m.shape, -1, np.int64)
@@ -371,21 +406,7 @@ def measure_cracks(
             n_tips=int(n_tips[k]),
             exact=c.exact,
         ))
-    out = [c for c in out if c.tip_to_tip >= min_length]
-    out.sort(key=lambda c: c.tip_to_tip, reverse=True)
-    if not out:
-        return CrackMeasurement(0.0, 0.0, 0.0, float("nan"), float("nan"), [])
-    total = float(sum(c.total_length for c in out))
-    area = float(sum(c.area for c in out))
-    widths = [c.max_width for c in out if np.isfinite(c.max_width)]
-    return CrackMeasurement(
-        longest_path=out[0].tip_to_tip,
-        tip_to_tip_sum=float(sum(c.tip_to_tip for c in out)),
-        total_length=total,
-        mean_width=area / total if total > 0 else float("nan"),
-        max_width=max(widths) if widths else float("nan"),
-        components=out,
-    )
+    return _summary([c for c in out if c.tip_to_tip >= min_length])
 
 
 def longest_crack_path(mask: np.ndarray, coords: float | np.ndarray | None = None, **kw) -> float:
