@@ -14,9 +14,7 @@ from typing import Any, Sequence
 import torch
 
 from trainer.core.checkpoint import load_checkpoint, save_checkpoint
-from trainer.core.device import pick_device
 from trainer.core.errors import TrainerInputError
-from trainer.seg.appearance import targets_from_folder
 from trainer.seg.scoring import load_model
 from trainer.seg.target_bn import DEFAULT_BATCHES, adapt_bn_to_photos
 
@@ -57,10 +55,3 @@ def adapt_checkpoint(src: str | Path, dst: str | Path, photos: Sequence[str], de
     dst.parent.mkdir(parents=True, exist_ok=True)
     save_checkpoint(dst, payload)
     return record
-
-
-def run_adapt_bn(args: argparse.Namespace) -> dict[str, Any]:
-    device = pick_device(args.device)
-    photos = targets_from_folder(args.target)
-    return adapt_checkpoint(args.checkpoint, args.out, photos, device, target=str(args.target), batches=args.batches,
-                            batch_size=args.batch_size, crop=args.crop, workers=args.workers, seed=args.seed)

@@ -31,7 +31,6 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from trainer.core.device import pick_device
 from trainer.core.errors import TrainerInputError
 from trainer.core.imageio import read_rgb
 from trainer.seg.scoring import load_model, predict_probability
@@ -197,18 +196,5 @@ def add_pseudo_label_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true")
 
 
-def run_pseudo_label(args: argparse.Namespace) -> dict[str, Any]:
-    from trainer.seg.appearance import targets_from_folder
-
-    if not Path(args.checkpoint).is_file():
-        raise TrainerInputError(f"checkpoint {args.checkpoint} does not exist")
-    device = pick_device(args.device)
-    settings = PseudoSettings(teacher=str(args.checkpoint), portion=args.portion,
-                              background_portion=args.background_portion, target_bn=args.target_bn,
-                              bn_batches=args.batches, batch_size=args.batch_size, crop=args.crop, seed=args.seed)
-    return write_pseudo_folder(targets_from_folder(args.target), args.out, settings, device, workers=args.workers,
-                               progress=not args.no_progress)
-
-
 __all__ = ["PseudoSettings", "class_thresholds", "label_maps", "write_pseudo_folder",
-           "finished_record", "add_pseudo_label_args", "run_pseudo_label", "RECORD"]
+           "finished_record", "add_pseudo_label_args", "RECORD"]

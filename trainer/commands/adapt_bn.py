@@ -16,10 +16,15 @@ def add_args(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from trainer.adapt.adabn import run_adapt_bn
+    from trainer.adapt.adabn import adapt_checkpoint
+    from trainer.core.device import pick_device
+    from trainer.seg.appearance import targets_from_folder
 
     resolve_checkpoint(args, NAME)
-    r = run_adapt_bn(args)
+    photos = targets_from_folder(args.target)
+    r = adapt_checkpoint(args.checkpoint, args.out, photos, pick_device(args.device), target=str(args.target),
+                         batches=args.batches, batch_size=args.batch_size, crop=args.crop, workers=args.workers,
+                         seed=args.seed)
     print(f"BN statistics of {r['source']} re-estimated on {r['batches']} batches of {r['crop']}-px crops "
           f"from {r['photos']} photos in {r['target']}; wrote {args.out}")
     return 0

@@ -15,9 +15,9 @@ def add_args(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from trainer.imagefusion.stack import run_fuse
+    from trainer.imagefusion.stack import merge_stack
 
-    r = run_fuse(args)
+    r = merge_stack(args.images, args.out, args.levels)
     print(f"Q_Y {r['Q_Y']:.4f}  Q_C {r['Q_C']:.4f}  Q_G {r['Q_G']:.4f}  Q_MI {r['Q_MI']:.4f}")
     print(f"fused {r['inputs']} images ({r['levels']}-level) -> {r['out']}")
     return 0

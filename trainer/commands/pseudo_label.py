@@ -16,10 +16,21 @@ def add_args(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from trainer.adapt.pseudo_label import run_pseudo_label
+    from pathlib import Path
+
+    from trainer.adapt.pseudo_label import PseudoSettings, write_pseudo_folder
+    from trainer.core.device import pick_device
+    from trainer.core.errors import TrainerInputError
+    from trainer.seg.appearance import targets_from_folder
 
     resolve_checkpoint(args, NAME)
-    r = run_pseudo_label(args)
+    if not Path(args.checkpoint).is_file():
+        raise TrainerInputError(f"checkpoint {args.checkpoint} does not exist")
+    settings = PseudoSettings(teacher=str(args.checkpoint), portion=args.portion,
+                              background_portion=args.background_portion, target_bn=args.target_bn,
+                              bn_batches=args.batches, batch_size=args.batch_size, crop=args.crop, seed=args.seed)
+    r = write_pseudo_folder(targets_from_folder(args.target), args.out, settings, pick_device(args.device),
+                            workers=args.workers, progress=not args.no_progress)
     s = r["settings"]
     print(f"pseudo-labelled {r['photos']} photos with {s['teacher']} (target BN {'on' if s['target_bn'] else 'off'}, "
           f"portion {s['portion']}): crack {100 * r['crack_fraction']:.2f}% of pixels (p >= {r['threshold_crack']:.3f}), "

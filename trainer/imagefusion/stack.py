@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any, Sequence
 
 import cv2
 import numpy as np
@@ -37,13 +38,14 @@ def _read(path: str) -> tuple[np.ndarray, int]:
     return img.astype(np.float64) / np.iinfo(img.dtype).max, np.iinfo(img.dtype).max
 
 
-def run_fuse(args: argparse.Namespace) -> dict:
+def merge_stack(images: Sequence[str], out: str | Path, levels: int = 3) -> dict[str, Any]:
+    """Fuse ``images`` (an exposure or focus stack) into ``out``; returns the four quality scores."""
     from fusion.image.fuse import ImageFusionError, fuse_images
     from fusion.image.metrics import fusion_quality
 
-    if len(args.images) < 2:
-        raise TrainerInputError(f"merge-stack needs at least 2 images, got {len(args.images)}")
-    loaded = [_read(p) for p in args.images]
+    if len(images) < 2:
+        raise TrainerInputError(f"merge-stack needs at least 2 images, got {len(images)}")
+    loaded = [_read(p) for p in images]
     imgs = [a for a, _ in loaded]
     ndims = {a.ndim for a in imgs}
     if len(ndims) > 1:  # mixed grey and colour: fuse in grey
@@ -51,14 +53,14 @@ def run_fuse(args: argparse.Namespace) -> dict:
 
         imgs = [luminance(a) for a in imgs]
     try:
-        fused = fuse_images(imgs, args.levels)
+        fused = fuse_images(imgs, levels)
     except ImageFusionError as exc:
-        raise TrainerInputError(f"{exc} ({', '.join(args.images)})") from None
+        raise TrainerInputError(f"{exc} ({', '.join(map(str, images))})") from None
     top = 65535 if all(m == 65535 for _, m in loaded) else 255
-    out = Path(args.out)
+    out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     q = np.round(fused * top).astype(np.uint16 if top == 65535 else np.uint8)
     if not cv2.imwrite(str(out), cv2.cvtColor(q, cv2.COLOR_RGB2BGR) if q.ndim == 3 else q):
         raise TrainerInputError(f"cannot write {out} (unknown extension or unwritable folder)")
     scores = fusion_quality([255 * a for a in imgs], 255 * fused)
-    return {"out": str(out), "levels": args.levels, "inputs": len(imgs), **scores}
+    return {"out": str(out), "levels": levels, "inputs": len(imgs), **scores}
