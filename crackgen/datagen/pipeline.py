@@ -217,42 +217,7 @@ class SampleProducer:
         }
         if self.recipe.label.policy != "thesis":  # both labels on the same render, to compare
             members["mask_thesis.png"] = label.thesis
-        sensors: dict[str, Any] = {}
-        tof = lidar = None
-        if spec.tof.enabled:
-            with tm.stage("tof"):
-                tof = simulate_tof(spec.tof, rig, caster, albedo_from_map(maps.albedo), sensor_rng(spec.tof.seed))
-            members["tof.exr"] = tof.depth_rgb
-            # native sensor image: Z = measured radial range (m, -1 none), A = amplitude
-            members["tofraw.exr"] = {"Z": tof.range_m, "A": tof.amplitude}
-            sensors["tof"] = {"fill_rgb": fill_ratio(tof.depth_rgb), "valid": float(tof.valid.mean()),
-                              "mixed": int(tof.mixed.sum())}
-        if spec.lidar.enabled:
-            with tm.stage("lidar"):
-                lidar = simulate_lidar(spec.lidar, rig, caster, sensor_rng(spec.lidar.seed))
-            members["lidar.exr"] = lidar.depth_rgb
-            sensors["lidar"] = {"fill_rgb": fill_ratio(lidar.depth_rgb), "points": int(len(lidar.points_world))}
-        camera_views = None  # the RGB views after the camera, when SGBM is to match those
-        if rig.right is not None and spec.stereo.sgbm_input == "camera":
-            with tm.stage("camera_effects"):
-                camera_views, camera_effects_meta = camera_effects_members(
-                    spec.camera_effects, {"rgb.png": out.rgb, "right.png": out.right_rgb})
-        if rig.right is not None:
-            left, right = ((out.rgb, out.right_rgb) if camera_views is None
-                           else (camera_views["rgb.png"], camera_views["right.png"]))
-            with tm.stage("stereo"):
-                st = simulate_stereo(spec.stereo, rig, left, right, gt.depth, tof,
-                                     None if lidar is None else lidar.depth_rgb)
-            members["right.png"] = out.right_rgb
-            members["disp_sgm.exr"] = st.disp_sgm
-            members["disp_gt.exr"] = st.disp_gt
-            if st.disp_tof is not None:  # SYNTH3-style fusion inputs in the left view
-                members["disp_tof.exr"] = st.disp_tof
-                members["tofamp.exr"] = st.tof_amplitude
-            if st.disp_lidar is not None:  # the 3-channel LiDAR/stereo variant's input
-                members["disp_lidar.exr"] = st.disp_lidar
-            sensors["stereo"] = {"fill_sgm": fill_ratio(st.disp_sgm), "fill_gt": fill_ratio(st.disp_gt),
-                                 "sgbm_input": spec.stereo.sgbm_input}
+        sensors, camera_views, camera_effects_meta = _simulate_sensors(spec, rig, caster, maps, out, gt, tm, members)
         if lens_map is not None:  # the lens, before the camera's effects: every RGB-view member, one map
             with tm.stage("lens"):
                 members = warp_view_members(members, lens_map)
@@ -274,31 +239,10 @@ class SampleProducer:
             "index": int(index),
             "spec": spec.to_dict(),
             "cameras": rig.to_meta(),
-            "seeds": {
-                "recipe_seed": spec.recipe_seed,
-                "seed_sequence": [spec.recipe_seed, int(index)],
-                "crack_noise": spec.crack.noise_seed,
-                "material": spec.material.seed,
-                "shadow": spec.shadow.seed,
-                "render": spec.render.seed,
-                "tof": spec.tof.seed,
-                "lidar": spec.lidar.seed,
-            },
-            "crack": {
-                "shape": spec.crack.shape,
-                "present": bool(spec.crack.present),
-                "length_m": None if not np.isfinite(cm.length_m) else float(cm.length_m),
-                "surface_coverage": cm.coverage,
-                "pixel_fraction": crack_pixel_fraction(members["mask.png"]),
-            },
+            "seeds": _seeds_meta(spec, index),
+            **_scene_meta(spec, cm, maps, members["mask.png"]),  # crack, material, lights, sky, shadow
             "label": label.meta,
             "visible": visible,
-            "material": {"family": spec.material.family, "distractors": [d.kind for d in spec.material.distractors],
-                         "clutter": [c.kind for c in spec.material.clutter], "photo": maps.photo},
-            "lights": [{"kind": L.kind, "elevation_deg": float(np.degrees(L.elevation_rad))} for L in spec.lights],
-            **({"sky": {"turbidity": spec.sky.turbidity, "overcast": spec.sky.overcast,
-                        "sun_elevation_deg": float(np.degrees(spec.sky.sun_elevation_rad))}} if spec.sky.enabled else {}),
-            "shadow": {"enabled": spec.shadow.enabled, "pattern": spec.shadow.pattern},
             "depth": {
                 "source": "raycast",
                 "fill": fill_ratio(gt.depth),
@@ -317,6 +261,85 @@ class SampleProducer:
         """(members, meta) of sample ``index``: what a shard holds for it (``json`` = meta)."""
         s = self.make(index)
         return s.members, s.meta
+
+
+def _simulate_sensors(spec: SampleSpec, rig, caster, maps, out, gt, tm: _Timer,
+                      members: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any] | None, dict[str, Any] | None]:
+    """ToF, LiDAR and stereo on the clean render, their members added to ``members``.
+
+    Returns the sensors' metadata and, when SGBM is to match the camera's views
+    (``sgbm_input = "camera"``), those views and the camera effects' record (else None, None).
+    """
+    sensors: dict[str, Any] = {}
+    tof = lidar = None
+    if spec.tof.enabled:
+        with tm.stage("tof"):
+            tof = simulate_tof(spec.tof, rig, caster, albedo_from_map(maps.albedo), sensor_rng(spec.tof.seed))
+        members["tof.exr"] = tof.depth_rgb
+        # native sensor image: Z = measured radial range (m, -1 none), A = amplitude
+        members["tofraw.exr"] = {"Z": tof.range_m, "A": tof.amplitude}
+        sensors["tof"] = {"fill_rgb": fill_ratio(tof.depth_rgb), "valid": float(tof.valid.mean()),
+                          "mixed": int(tof.mixed.sum())}
+    if spec.lidar.enabled:
+        with tm.stage("lidar"):
+            lidar = simulate_lidar(spec.lidar, rig, caster, sensor_rng(spec.lidar.seed))
+        members["lidar.exr"] = lidar.depth_rgb
+        sensors["lidar"] = {"fill_rgb": fill_ratio(lidar.depth_rgb), "points": int(len(lidar.points_world))}
+    camera_views = camera_effects_meta = None  # the RGB views after the camera, when SGBM is to match those
+    if rig.right is not None and spec.stereo.sgbm_input == "camera":
+        with tm.stage("camera_effects"):
+            camera_views, camera_effects_meta = camera_effects_members(
+                spec.camera_effects, {"rgb.png": out.rgb, "right.png": out.right_rgb})
+    if rig.right is not None:
+        left, right = ((out.rgb, out.right_rgb) if camera_views is None
+                       else (camera_views["rgb.png"], camera_views["right.png"]))
+        with tm.stage("stereo"):
+            st = simulate_stereo(spec.stereo, rig, left, right, gt.depth, tof,
+                                 None if lidar is None else lidar.depth_rgb)
+        members["right.png"] = out.right_rgb
+        members["disp_sgm.exr"] = st.disp_sgm
+        members["disp_gt.exr"] = st.disp_gt
+        if st.disp_tof is not None:  # SYNTH3-style fusion inputs in the left view
+            members["disp_tof.exr"] = st.disp_tof
+            members["tofamp.exr"] = st.tof_amplitude
+        if st.disp_lidar is not None:  # the 3-channel LiDAR/stereo variant's input
+            members["disp_lidar.exr"] = st.disp_lidar
+        sensors["stereo"] = {"fill_sgm": fill_ratio(st.disp_sgm), "fill_gt": fill_ratio(st.disp_gt),
+                             "sgbm_input": spec.stereo.sgbm_input}
+    return sensors, camera_views, camera_effects_meta
+
+
+def _scene_meta(spec: SampleSpec, cm, maps, mask: np.ndarray) -> dict[str, Any]:
+    """What the scene held: crack, material, lights, sky and shadow (shards store JSON with sorted keys)."""
+    return {
+        "crack": {
+            "shape": spec.crack.shape,
+            "present": bool(spec.crack.present),
+            "length_m": None if not np.isfinite(cm.length_m) else float(cm.length_m),
+            "surface_coverage": cm.coverage,
+            "pixel_fraction": crack_pixel_fraction(mask),
+        },
+        "material": {"family": spec.material.family, "distractors": [d.kind for d in spec.material.distractors],
+                     "clutter": [c.kind for c in spec.material.clutter], "photo": maps.photo},
+        "lights": [{"kind": L.kind, "elevation_deg": float(np.degrees(L.elevation_rad))} for L in spec.lights],
+        **({"sky": {"turbidity": spec.sky.turbidity, "overcast": spec.sky.overcast,
+                    "sun_elevation_deg": float(np.degrees(spec.sky.sun_elevation_rad))}} if spec.sky.enabled else {}),
+        "shadow": {"enabled": spec.shadow.enabled, "pattern": spec.shadow.pattern},
+    }
+
+
+def _seeds_meta(spec: SampleSpec, index: int) -> dict[str, Any]:
+    """The seeds a sample was drawn from, so any single stage can be replayed."""
+    return {
+        "recipe_seed": spec.recipe_seed,
+        "seed_sequence": [spec.recipe_seed, int(index)],
+        "crack_noise": spec.crack.noise_seed,
+        "material": spec.material.seed,
+        "shadow": spec.shadow.seed,
+        "render": spec.render.seed,
+        "tof": spec.tof.seed,
+        "lidar": spec.lidar.seed,
+    }
 
 
 _BLENDER_VERSION: dict[str, str] | None = None
