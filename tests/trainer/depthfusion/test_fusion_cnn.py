@@ -156,7 +156,7 @@ def test_median_disparity_reference_makes_the_input_shift_free(fusion_shards, tm
     assert "disp_ref differ" in capsys.readouterr().err  # resuming without the option is refused
 
 
-REAL_CONES = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real" / "stereo" / "middlebury2003_cones"
+REAL_CONES = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "real" / "stereo" / "middlebury2003_cones"
 
 
 @pytest.mark.skipif(not REAL_CONES.is_dir(), reason="../shared/data/real is absent")

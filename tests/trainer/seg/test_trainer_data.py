@@ -14,7 +14,7 @@ from trainer.seg.depth import align_to_rgb, disparity_to_depth, normalise_depth
 from trainer.seg.sources import RealFolder
 from trainer.seg.stream import SegStream, mix_repeat
 
-REAL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real"
+REAL = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "real"
 
 
 @pytest.mark.skipif(not (REAL / "deepcrack_train").is_dir(), reason="shared real data absent")

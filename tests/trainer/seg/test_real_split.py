@@ -6,7 +6,7 @@ import pytest
 from trainer.core.errors import TrainerInputError
 from trainer.seg.real_split import compile_group_pattern, group_of, read_split, split_groups
 
-DEEPCRACK = Path(__file__).resolve().parents[3] / "shared" / "data" / "real" / "deepcrack_train" / "images"
+DEEPCRACK = Path(__file__).resolve().parents[4] / "shared" / "data" / "real" / "deepcrack_train" / "images"
 
 
 def assert_groups_whole(split, pattern=None):
