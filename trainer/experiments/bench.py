@@ -17,7 +17,7 @@ from torch.utils.data import DataLoader
 
 from trainer.core.device import pick_device
 from trainer.core.errors import TrainerInputError
-from trainer.seg.builders import add_data_args, real_folder, sample_config_from_args, shard_source
+from trainer.seg.builders import DataOptions, add_data_args, real_folder, sample_config, shard_source
 from trainer.seg.losses import make_loss
 from trainer.seg.models import ARCHS, build_model
 from trainer.seg.stream import SegStream
@@ -105,11 +105,13 @@ def bench_fusion_model(variant: str, size: int, batch: int, steps: int, device: 
 
 
 def run_bench(args: argparse.Namespace) -> dict[str, Any]:
-    cfg = sample_config_from_args(args)
+    opts = DataOptions.from_args(args)
+    cfg = sample_config(opts, crop=getattr(args, "crop", None), rotate_deg=getattr(args, "rotate_deg", 15.0),
+                        jitter=getattr(args, "jitter", 0.3))
     res: dict[str, Any] = {"loader": [], "model": None}
     if args.data or args.real:
-        shards = shard_source(args, args.data) if args.data else None
-        real = real_folder(args, args.real) if args.real else None
+        shards = shard_source(opts, args.data) if args.data else None
+        real = real_folder(opts, args.real) if args.real else None
         for w in (int(x) for x in args.workers.split(",")):
             ds = SegStream(cfg, shards, real, batch_size=1, train=True, seed=args.seed, skip_bad=args.skip_bad)
             res["loader"].append(bench_loader(ds, w, args.samples))

@@ -72,12 +72,12 @@ from trainer.experiments.eval_sets import DEFAULT_REAL_ROOT, cross_domain_sets
 from trainer.experiments.scoreboard import EvalSet
 from trainer.seg.appearance import targets_from_folder, targets_from_paths
 from trainer.seg.builders import (
+    DataOptions,
     add_data_args,
     add_split_args,
     eval_loader,
     grouped_split,
     real_folder,
-    sample_config_from_args,
 )
 from trainer.seg.metrics import ConfusionHistogram
 from trainer.seg.real_split import RealSplit, split_groups
@@ -217,20 +217,21 @@ class RealSets:
 def real_sets_for(args: argparse.Namespace, out: Path) -> RealSets:
     """Grouped split of ``--real`` (train / val / test, or train / val with ``--real-test``), written to OUT."""
     if args.real_test:
-        split = split_groups(real_folder(args, args.real).keys, val_fraction=args.val_fraction, test_fraction=0.0,
+        split = split_groups(real_folder(DataOptions.from_args(args), args.real).keys, val_fraction=args.val_fraction, test_fraction=0.0,
                              seed=args.split_seed, group_pattern=args.group_pattern,
                              source=str(Path(args.real).resolve()))
-        test_root, test = args.real_test, real_folder(args, args.real_test)
+        test_root, test = args.real_test, real_folder(DataOptions.from_args(args), args.real_test)
     else:
         if not args.test_fraction > 0:
             raise TrainerInputError("give a real test set: --real-test FOLDER or --test-fraction F > 0")
-        split = grouped_split(args, args.real)
-        test_root, test = args.real, real_folder(args, args.real, split.test)
+        split = grouped_split(DataOptions.from_args(args), args.real, val_fraction=args.val_fraction,
+                              test_fraction=args.test_fraction, seed=args.split_seed)
+        test_root, test = args.real, real_folder(DataOptions.from_args(args), args.real, split.test)
     if not args.val_fraction > 0:
         raise TrainerInputError("--val-fraction must be > 0: thresholds are chosen on the validation split")
     out.mkdir(parents=True, exist_ok=True)
     split.write(out)
-    return RealSets(split.train, real_folder(args, args.real, split.val), test, test_root, split)
+    return RealSets(split.train, real_folder(DataOptions.from_args(args), args.real, split.val), test, test_root, split)
 
 
 def adaptation_targets(args: argparse.Namespace, train_stems: list[str] | None) -> tuple[str, ...] | None:
@@ -239,7 +240,7 @@ def adaptation_targets(args: argparse.Namespace, train_stems: list[str] | None) 
         return None
     if args.target:
         return targets_from_folder(args.target)
-    folder = real_folder(args, args.real, train_stems)
+    folder = real_folder(DataOptions.from_args(args), args.real, train_stems)
     return targets_from_paths([folder.image_path(k) for k in folder.keys])
 
 
@@ -413,7 +414,7 @@ def run_sim2real(args: argparse.Namespace) -> dict[str, Any]:
         if any(r in TARGET_RUNS or r == "finetune" for r in runs) else None
     device = _device(args)
     results: dict[str, Any] = {}
-    cfg = sample_config_from_args(args)
+    cfg = DataOptions.from_args(args)
     table = {"arch": args.arch, "channels": cfg.channels, "depth": args.depth, "depth_norm": cfg.depth_norm,
              "mask_member": args.mask_member or "mask.png", "max_steps": args.max_steps,
              "batch_size": args.batch_size, "crop": args.crop, "seed": args.seed, "lr": args.lr,

@@ -1,4 +1,4 @@
-"""Build sources, sample configs and loaders from parsed CLI arguments.
+"""Build sources, sample configs and loaders from the data flags, typed once as ``DataOptions``.
 
 Shared by ``seg``, ``evaluate``, ``predict``, ``sim2real`` and ``bench`` so
 every command reads folders and depth the same way.
@@ -6,6 +6,7 @@ every command reads folders and depth the same way.
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -76,86 +77,121 @@ def add_split_args(p: argparse.ArgumentParser, *, val_fraction: float, test_frac
                         "first '-', DeepCrack's tiles NAME-k); 'none': every file its own group")
 
 
-def grouped_split(args: argparse.Namespace, root: str | Path, stems: list[str] | None = None) -> RealSplit:
-    """The grouped train / validation / test split of a real folder from the split flags."""
-    folder = real_folder(args, root, stems)
-    return split_groups(folder.keys, val_fraction=args.val_fraction, test_fraction=getattr(args, "test_fraction", 0.0),
-                        seed=args.split_seed, group_pattern=args.group_pattern, source=str(Path(root).resolve()))
-
-
-def resolve_valid_channel(args: argparse.Namespace) -> bool:
-    """``--valid-channel`` / ``--no-valid-channel``, else on for sparse depth; stored back as a bool."""
-    if args.depth == "none":
-        if args.valid_channel:
+def resolve_valid_channel(depth: str, valid_channel: bool | None) -> bool:
+    """``--valid-channel`` / ``--no-valid-channel``, else on for sparse depth."""
+    if depth == "none":
+        if valid_channel:
             raise TrainerInputError("--valid-channel needs a depth input (--depth tof|lidar|gt)")
-        args.valid_channel = False
-    elif args.valid_channel is None:
-        args.valid_channel = args.depth in SPARSE_DEPTHS
-    return bool(args.valid_channel)
+        return False
+    return depth in SPARSE_DEPTHS if valid_channel is None else bool(valid_channel)
 
 
-def channels_from_args(args: argparse.Namespace) -> str:
-    valid = resolve_valid_channel(args)
-    if args.depth == "none":
-        return "rgb"
-    return "rgbdv" if valid else "rgbd"
+@dataclass(frozen=True)
+class DataOptions:
+    """How real folders and shards are read and turned into network input: the data flags, typed and resolved."""
+
+    depth: str = "none"
+    valid_channel: bool = False
+    image_dir: str = "images"
+    mask_dir: str = "masks"
+    mask_suffix: str = ""
+    ignore_dir: str = "ignore"
+    real_depth_dir: str | None = None
+    real_depth_kind: str = "depth"
+    real_depth_scale: float = 1.0
+    focal_px: float | None = None
+    baseline_m: float | None = None
+    depth_near: float = 0.2
+    depth_far: float = 5.0
+    depth_norm: str = "fixed"
+    relief: str = DEFAULT_RELIEF
+    relief_range_mm: float = DEFAULT_RELIEF_RANGE_MM
+    relief_sigma: float = DEFAULT_RELIEF_SIGMA
+    mask_member: str = DEFAULT_MASK_MEMBER
+    size: int | None = None
+    skip_bad: bool = False
+    group_pattern: str = DEFAULT_GROUP_PATTERN
+
+    @property
+    def channels(self) -> str:
+        if self.depth == "none":
+            return "rgb"
+        return "rgbdv" if self.valid_channel else "rgbd"
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> DataOptions:
+        """The options a command's parsed flags (``add_data_args``) give; the one place that reads them."""
+        return cls(
+            depth=args.depth, valid_channel=resolve_valid_channel(args.depth, args.valid_channel),
+            image_dir=args.image_dir, mask_dir=args.mask_dir, mask_suffix=args.mask_suffix,
+            ignore_dir=getattr(args, "ignore_dir", "ignore"), real_depth_dir=args.real_depth_dir,
+            real_depth_kind=args.real_depth_kind, real_depth_scale=args.real_depth_scale, focal_px=args.focal_px,
+            baseline_m=args.baseline_m, depth_near=args.depth_near, depth_far=args.depth_far,
+            depth_norm=args.depth_norm, relief=args.relief, relief_range_mm=args.relief_range_mm,
+            relief_sigma=args.relief_sigma, mask_member=getattr(args, "mask_member", None) or DEFAULT_MASK_MEMBER,
+            size=args.size, skip_bad=args.skip_bad,
+            group_pattern=getattr(args, "group_pattern", DEFAULT_GROUP_PATTERN),
+        )
 
 
-def mask_member(args: argparse.Namespace) -> str:
-    return getattr(args, "mask_member", None) or DEFAULT_MASK_MEMBER
+def grouped_split(opts: DataOptions, root: str | Path, *, val_fraction: float, test_fraction: float,
+                  seed: int, stems: list[str] | None = None) -> RealSplit:
+    """The grouped train / validation / test split of a real folder."""
+    folder = real_folder(opts, root, stems)
+    return split_groups(folder.keys, val_fraction=val_fraction, test_fraction=test_fraction, seed=seed,
+                        group_pattern=opts.group_pattern, source=str(Path(root).resolve()))
 
 
-def shard_source(args: argparse.Namespace, path: str | Path, fraction: float = 0.0, split: str = "all",
+def shard_source(opts: DataOptions, path: str | Path, fraction: float = 0.0, split: str = "all",
                  seed: int = 0) -> ShardSource:
     """Synthetic shards with the run's depth member and label member."""
-    return ShardSource(Path(path), args.depth, fraction, split, seed, mask_member=mask_member(args))
+    return ShardSource(Path(path), opts.depth, fraction, split, seed, mask_member=opts.mask_member)
 
 
-def sample_config_from_args(args: argparse.Namespace) -> SampleConfig:
+def sample_config(opts: DataOptions, *, crop: int | None = None, rotate_deg: float = 15.0,
+                  jitter: float = 0.3) -> SampleConfig:
     return SampleConfig(
-        channels=channels_from_args(args), near_m=args.depth_near, far_m=args.depth_far,
-        depth_norm=args.depth_norm, relief=args.relief, relief_range_mm=args.relief_range_mm,
-        relief_sigma=args.relief_sigma, crop=getattr(args, "crop", None), size=args.size,
-        rotate_deg=getattr(args, "rotate_deg", 15.0), jitter=getattr(args, "jitter", 0.3),
+        channels=opts.channels, near_m=opts.depth_near, far_m=opts.depth_far, depth_norm=opts.depth_norm,
+        relief=opts.relief, relief_range_mm=opts.relief_range_mm, relief_sigma=opts.relief_sigma, crop=crop,
+        size=opts.size, rotate_deg=rotate_deg, jitter=jitter,
     )
 
 
-def real_folder(args: argparse.Namespace, root: str | Path, stems: list[str] | None = None,
+def real_folder(opts: DataOptions, root: str | Path, stems: list[str] | None = None,
                 require_masks: bool = True) -> RealFolder:
     root = Path(root)
     if not root.is_dir():
         raise TrainerInputError(f"real folder {root} does not exist")
-    uses_depth = args.depth != "none"
+    uses_depth = opts.depth != "none"
     return RealFolder(
-        root, image_dir=args.image_dir, mask_dir=args.mask_dir, mask_suffix=args.mask_suffix,
-        depth_dir=args.real_depth_dir if uses_depth else None, depth_kind=args.real_depth_kind,
-        depth_scale=args.real_depth_scale, focal_px=args.focal_px, baseline_m=args.baseline_m,
-        stems=stems, require_masks=require_masks, ignore_dir=getattr(args, "ignore_dir", "ignore"),
+        root, image_dir=opts.image_dir, mask_dir=opts.mask_dir, mask_suffix=opts.mask_suffix,
+        depth_dir=opts.real_depth_dir if uses_depth else None, depth_kind=opts.real_depth_kind,
+        depth_scale=opts.real_depth_scale, focal_px=opts.focal_px, baseline_m=opts.baseline_m,
+        stems=stems, require_masks=require_masks, ignore_dir=opts.ignore_dir,
     )
 
 
-def real_split(args: argparse.Namespace, root: str | Path, fraction: float, seed: int,
+def real_split(opts: DataOptions, root: str | Path, fraction: float, seed: int,
                stems: list[str] | None = None) -> tuple[RealFolder, RealFolder | None, RealSplit | None]:
     """(train, validation, split) views of one real folder (optionally restricted to ``stems``): a grouped
     split (``--group-pattern``) holding out ``fraction`` of the photos, or the whole folder when it is 0."""
-    full = real_folder(args, root, stems)
+    full = real_folder(opts, root, stems)
     if fraction <= 0:
         return full, None, None
     split = split_groups(full.keys, val_fraction=fraction, test_fraction=0.0, seed=seed,
-                         group_pattern=getattr(args, "group_pattern", DEFAULT_GROUP_PATTERN),
-                         source=str(Path(root).resolve()))
-    return real_folder(args, root, split.train), real_folder(args, root, split.val), split
+                         group_pattern=opts.group_pattern, source=str(Path(root).resolve()))
+    return real_folder(opts, root, split.train), real_folder(opts, root, split.val), split
 
 
 def eval_loader(ds: SegStream, workers: int, device: torch.device) -> DataLoader:
     return DataLoader(ds, batch_size=1, num_workers=workers, pin_memory=device.type == "cuda")
 
 
-def eval_stream(args: argparse.Namespace, cfg: SampleConfig, shards: ShardSource | None,
-                real: RealFolder | None) -> SegStream | None:
+def eval_stream(cfg: SampleConfig, shards: ShardSource | None, real: RealFolder | None, *, seed: int,
+                skip_bad: bool) -> SegStream | None:
     if shards is None and real is None:
         return None
-    return SegStream(cfg, shards, real, train=False, seed=args.seed, skip_bad=args.skip_bad)
+    return SegStream(cfg, shards, real, train=False, seed=seed, skip_bad=skip_bad)
 
 
 def describe(ds: Any) -> str:

@@ -17,7 +17,7 @@ from typing import Any
 from trainer.core.checkpoint import load_checkpoint
 from trainer.core.device import pick_device
 from trainer.core.errors import TrainerInputError
-from trainer.seg.builders import add_data_args, eval_loader, real_folder, shard_source
+from trainer.seg.builders import DataOptions, add_data_args, eval_loader, real_folder, shard_source
 from trainer.seg.metrics import plot_pr_curve
 from trainer.seg.scoring import evaluate, inherit_depth, load_model
 from trainer.seg.stream import SegStream
@@ -45,8 +45,9 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     inherit_depth(args, train_args, cfg)
     if not args.data and not args.real:
         raise TrainerInputError("give evaluation data: --data SHARDS and/or --real FOLDER")
-    shards = shard_source(args, args.data) if args.data else None
-    real = real_folder(args, args.real) if args.real else None
+    opts = DataOptions.from_args(args)
+    shards = shard_source(opts, args.data) if args.data else None
+    real = real_folder(opts, args.real) if args.real else None
     ds = SegStream(cfg, shards, real, train=False, seed=args.seed, skip_bad=args.skip_bad)
     amp = device.type == "cuda"
     hist = evaluate(model, eval_loader(ds, args.workers, device), device, amp, progress=not args.no_progress)

@@ -36,7 +36,7 @@ from tqdm import tqdm
 from trainer.core.checkpoint import load_checkpoint
 from trainer.core.device import pick_device
 from trainer.core.errors import TrainerInputError
-from trainer.seg.builders import add_data_args, real_folder
+from trainer.seg.builders import DataOptions, add_data_args, real_folder
 from trainer.seg.scoring import inherit_depth, load_model, predict_probability
 from trainer.seg.sources import _SHARD_MEMBER
 from trainer.seg.threshold import operating_threshold
@@ -173,7 +173,7 @@ def run_predict(args: argparse.Namespace) -> PredictResult:
         model_depth = args.depth
         if K is not None and args.real_depth_dir:  # depth for the measurement, even for an RGB model
             args.depth = "gt"
-        folder = real_folder(args, root, require_masks=False)
+        folder = real_folder(DataOptions.from_args(args), root, require_masks=False)
         args.depth = model_depth
         items, total, load, image_path = folder.keys, len(folder.keys), folder.load, folder.image_path
     out = Path(args.out)

@@ -37,14 +37,14 @@ from trainer.core.errors import TrainerInputError
 from trainer.seg.appearance import SiteAdaptation, parse_band, targets_from_folder
 from trainer.seg.augment import SampleConfig
 from trainer.seg.builders import (
+    DataOptions,
     add_data_args,
     describe,
     eval_loader,
     eval_stream,
-    mask_member,
     real_split,
     resolve_valid_channel,
-    sample_config_from_args,
+    sample_config,
     shard_source,
 )
 from trainer.seg.losses import LOSSES, Loss, make_loss
@@ -52,6 +52,7 @@ from trainer.seg.models import ARCHS, build_model
 from trainer.seg.precise_bn import precise_bn
 from trainer.seg.real_split import DEFAULT_GROUP_PATTERN, RealSplit
 from trainer.seg.scoring import evaluate
+from trainer.seg.sources import DEFAULT_MASK_MEMBER
 from trainer.seg.stream import SegStream, dist_info, mix_repeat
 from trainer.seg.target_bn import DEFAULT_BATCHES, adapt_bn_to_photos
 from trainer.seg.threshold import THRESHOLD_KEY, threshold_record
@@ -217,7 +218,7 @@ def load_resume_checkpoint(args: argparse.Namespace) -> dict[str, Any] | None:
         return ckpt
     if args.valid_channel is None and "valid_channel" in ckpt["args"]:
         args.valid_channel = ckpt["args"]["valid_channel"]
-    resolve_valid_channel(args)
+    args.valid_channel = resolve_valid_channel(args.depth, args.valid_channel)
     for k in RESUME_FIXED_ARGS:
         if k in ckpt["args"] and ckpt["args"][k] != getattr(args, k):
             raise TrainerInputError(f"--{k.replace('_', '-')} {getattr(args, k)!r} differs from the checkpoint's "
@@ -227,27 +228,28 @@ def load_resume_checkpoint(args: argparse.Namespace) -> dict[str, Any] | None:
 
 def build_datasets(args: argparse.Namespace) -> tuple[SegStream, SegStream | None, RealSplit | None]:
     """(training stream, validation stream or None, grouped split of --real or None) from the data flags."""
-    cfg = sample_config_from_args(args)
+    opts = DataOptions.from_args(args)
+    cfg = sample_config(opts, crop=args.crop, rotate_deg=args.rotate_deg, jitter=args.jitter)
     if not args.data and not args.real:
         raise TrainerInputError("give training data: --data SHARDS and/or --real FOLDER")
     frac = args.val_fraction
     syn = val_syn = None
     if args.data:
-        syn = shard_source(args, args.data, frac, "train" if frac > 0 else "all", args.split_seed)
+        syn = shard_source(opts, args.data, frac, "train" if frac > 0 else "all", args.split_seed)
         if frac > 0:
-            val_syn = shard_source(args, args.data, frac, "val", args.split_seed)
+            val_syn = shard_source(opts, args.data, frac, "val", args.split_seed)
     real = val_real = split = None
     if args.real:
-        real, val_real, split = real_split(args, args.real, frac, args.split_seed, getattr(args, "real_stems", None))
+        real, val_real, split = real_split(opts, args.real, frac, args.split_seed, getattr(args, "real_stems", None))
     if args.val_data:
-        val_syn = shard_source(args, args.val_data)
+        val_syn = shard_source(opts, args.val_data)
     if args.val_real:
-        val_real = real_split(args, args.val_real, 0.0, 0)[0]
+        val_real = real_split(opts, args.val_real, 0.0, 0)[0]
     repeat = args.real_repeat or (mix_repeat(len(real), len(syn)) if (real is not None and syn is not None) else 1)
     train_ds = SegStream(cfg, syn, real, real_repeat=repeat, batch_size=args.batch_size, train=True,
                          seed=args.seed, skip_bad=args.skip_bad, adapt=site_adaptation(args) if syn else None)
     eval_cfg = SampleConfig(**{**cfg.__dict__, "crop": None})
-    return train_ds, eval_stream(args, eval_cfg, val_syn, val_real), split
+    return train_ds, eval_stream(eval_cfg, val_syn, val_real, seed=args.seed, skip_bad=args.skip_bad), split
 
 
 def site_adaptation(args: argparse.Namespace) -> SiteAdaptation | None:
@@ -523,8 +525,9 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
         out.mkdir(parents=True, exist_ok=True)
     if args.crop == 0:
         args.crop = None
-    args.mask_member = mask_member(args)  # stored resolved in the checkpoint
+    args.mask_member = args.mask_member or DEFAULT_MASK_MEMBER  # stored resolved in the checkpoint
     ckpt = load_resume_checkpoint(args)
+    args.valid_channel = resolve_valid_channel(args.depth, args.valid_channel)  # stored resolved too
     train_ds, val_ds, split = build_datasets(args)
     if split is not None and main_proc:
         split.write(out)

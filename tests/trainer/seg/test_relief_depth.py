@@ -4,7 +4,7 @@ import argparse
 import numpy as np
 import pytest
 
-from trainer.seg.builders import add_data_args, channels_from_args
+from trainer.seg.builders import DataOptions, add_data_args
 from trainer.seg.depth import normalise_depth, relief_mm
 
 H, W, F = 96, 128, 150.0  # image size and focal length (px) of the hand-made camera
@@ -102,9 +102,9 @@ def _parse(*argv: str) -> argparse.Namespace:
 
 
 def test_validity_channel_defaults_on_for_sparse_depth_and_can_be_turned_off():
-    assert channels_from_args(_parse("--depth", "tof")) == "rgbdv"
-    assert channels_from_args(_parse("--depth", "lidar")) == "rgbdv"
-    assert channels_from_args(_parse("--depth", "gt")) == "rgbd"
-    assert channels_from_args(_parse("--depth", "gt", "--valid-channel")) == "rgbdv"
-    assert channels_from_args(_parse("--depth", "tof", "--no-valid-channel")) == "rgbd"
-    assert channels_from_args(_parse()) == "rgb"
+    assert DataOptions.from_args(_parse("--depth", "tof")).channels == "rgbdv"
+    assert DataOptions.from_args(_parse("--depth", "lidar")).channels == "rgbdv"
+    assert DataOptions.from_args(_parse("--depth", "gt")).channels == "rgbd"
+    assert DataOptions.from_args(_parse("--depth", "gt", "--valid-channel")).channels == "rgbdv"
+    assert DataOptions.from_args(_parse("--depth", "tof", "--no-valid-channel")).channels == "rgbd"
+    assert DataOptions.from_args(_parse()).channels == "rgb"
