@@ -198,6 +198,7 @@ def seg_args(args: argparse.Namespace, out: Path, data: str | None, real: str | 
     ns.val_fraction, ns.val_data, ns.val_real, ns.resume, ns.test_only = 0.0, None, None, None, False
     ns.adapt_target, ns.adapt_targets, ns.init = None, None, None
     ns.bn_target, ns.bn_targets = None, None
+    ns.target, ns.target_appearance, ns.target_bn = None, False, False  # sim2real's --target means its own rows
     for k, v in overrides.items():
         setattr(ns, k, v)
     return ns

@@ -32,6 +32,7 @@ import torch.distributed as dist
 from torch.utils.data import DataLoader
 from tqdm import tqdm
 
+from crackgen.cli_aliases import deprecated_alias, deprecation_note
 from trainer.core.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state, steps_seen
 from trainer.core.errors import TrainerInputError
 from trainer.seg.appearance import SiteAdaptation, parse_band, targets_from_folder
@@ -65,6 +66,31 @@ RESUME_FIXED_ARGS = ("arch", "depth", "valid_channel", "depth_norm", "relief", "
 # How depth becomes the input channels: --test-only takes them from the checkpoint, as evaluate/predict do.
 DEPTH_INPUT_ARGS = ("depth", "valid_channel", "depth_near", "depth_far", "depth_norm", "relief", "relief_range_mm",
                     "relief_sigma")
+
+
+class _OldTargetFlag(argparse.Action):
+    """``--adapt-target F`` / ``--bn-target F``, the old spellings of ``--target F --target-appearance|--target-bn``."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        new = "--target-appearance" if self.dest == "adapt_target" else "--target-bn"
+        deprecation_note("cracktrain", str(option_string), f"--target FOLDER {new}")
+        setattr(namespace, self.dest, values)
+
+
+def resolve_site_targets(args: argparse.Namespace) -> None:
+    """``--target`` with ``--target-appearance`` / ``--target-bn`` (or their old spellings) -> the folder each
+    use reads (``args.adapt_target``, ``args.bn_target``); one line when they do not fit together."""
+    uses = [u for u, on in (("--target-appearance", args.target_appearance), ("--target-bn", args.target_bn)) if on]
+    if args.target and not uses:
+        raise TrainerInputError("--target needs --target-appearance and/or --target-bn (what to do with the photos)")
+    if uses and not args.target:
+        raise TrainerInputError(f"{' and '.join(uses)} need --target FOLDER")
+    for on, dest in ((args.target_appearance, "adapt_target"), (args.target_bn, "bn_target")):
+        if on:
+            if getattr(args, dest) not in (None, args.target):
+                raise TrainerInputError(f"two site photo folders given ({getattr(args, dest)} and --target "
+                                        f"{args.target}): give one")
+            setattr(args, dest, args.target)
 
 
 def add_seg_args(p: argparse.ArgumentParser) -> None:
@@ -106,15 +132,22 @@ def add_seg_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--precise-bn", type=int, default=None, metavar="BATCHES",
                    help="after training, recompute BatchNorm statistics with the final weights on this many training "
                         "batches (default: 50 with --init, where the running statistics lag behind; else 0 = off)")
-    g = p.add_argument_group("site adaptation of synthetic RGB toward unlabeled photos (training only)")
-    g.add_argument("--adapt-target", default=None, metavar="FOLDER", help="folder of unlabeled target photos")
+    g = p.add_argument_group("unlabeled photos of the site: appearance transfer during training, target BN after it")
+    g.add_argument("--target", default=None, metavar="FOLDER", help="folder of unlabeled photos of the site")
+    g.add_argument("--target-appearance", action="store_true",
+                   help="pull the synthetic RGB toward the --target photos while training (Fourier/Reinhard/histogram)")
+    g.add_argument("--target-bn", action="store_true",
+                   help="re-estimate BN statistics on the --target photos at the end (weights unchanged)")
+    g.add_argument("--adapt-target", dest="adapt_target", default=None, metavar="FOLDER",
+                   action=_OldTargetFlag, help=argparse.SUPPRESS)  # old: --target F --target-appearance
     g.add_argument("--adapt-methods", default="fourier,reinhard,histogram", help="methods drawn uniformly per sample")
     g.add_argument("--adapt-band", default="0.005,0.05", help="Fourier band MIN,MAX (fraction of min(H, W))")
     g.add_argument("--adapt-prob", type=float, default=1.0, help="chance that a synthetic sample is adapted")
-    g = p.add_argument_group("target BatchNorm (AdaBN): BN statistics from unlabeled site photos after training")
-    g.add_argument("--bn-target", default=None, metavar="FOLDER",
-                   help="re-estimate BN statistics on these unlabeled photos at the end (weights unchanged)")
-    g.add_argument("--bn-target-batches", type=int, default=DEFAULT_BATCHES, help="batches of photo crops averaged")
+    g.add_argument("--bn-target", dest="bn_target", default=None, metavar="FOLDER",
+                   action=_OldTargetFlag, help=argparse.SUPPRESS)  # old: --target F --target-bn
+    g.add_argument("--target-bn-batches", dest="bn_target_batches", type=int, default=DEFAULT_BATCHES,
+                   help="target BN: batches of photo crops averaged")
+    deprecated_alias(p, "--bn-target-batches", "--target-bn-batches", "cracktrain")
     p.add_argument("--test-only", action="store_true", help="only validate the --resume checkpoint")
     p.add_argument("--no-progress", action="store_true")
     add_data_args(p)
@@ -253,7 +286,7 @@ def build_datasets(args: argparse.Namespace) -> tuple[SegStream, SegStream | Non
 
 
 def site_adaptation(args: argparse.Namespace) -> SiteAdaptation | None:
-    """From ``--adapt-target`` (a folder), or ``args.adapt_targets`` (paths set by sim2real)."""
+    """From ``--target F --target-appearance`` (a folder), or ``args.adapt_targets`` (paths set by sim2real)."""
     targets = getattr(args, "adapt_targets", None)
     if not targets and getattr(args, "adapt_target", None):
         targets = targets_from_folder(args.adapt_target)
@@ -301,7 +334,7 @@ def finish_precise_bn(run: Run, train_ds: SegStream, state: TrainState) -> None:
 
 
 def bn_target_photos(args: argparse.Namespace) -> tuple[str, ...] | None:
-    """Photos for target BN: ``args.bn_targets`` (paths set by sim2real) or ``--bn-target FOLDER``."""
+    """Photos for target BN: ``args.bn_targets`` (paths set by sim2real) or ``--target F --target-bn``."""
     photos = getattr(args, "bn_targets", None)
     if not photos and getattr(args, "bn_target", None):
         photos = targets_from_folder(args.bn_target)
@@ -525,6 +558,7 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
         out.mkdir(parents=True, exist_ok=True)
     if args.crop == 0:
         args.crop = None
+    resolve_site_targets(args)
     args.mask_member = args.mask_member or DEFAULT_MASK_MEMBER  # stored resolved in the checkpoint
     ckpt = load_resume_checkpoint(args)
     args.valid_channel = resolve_valid_channel(args.depth, args.valid_channel)  # stored resolved too
@@ -532,7 +566,7 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
     if split is not None and main_proc:
         split.write(out)
     if bn_target_photos(args) and train_ds.cfg.channels != "rgb":  # checked before any step is trained
-        raise TrainerInputError(f"--bn-target needs an RGB model (--depth none); photos have no {args.depth} depth")
+        raise TrainerInputError(f"--target-bn needs an RGB model (--depth none); photos have no {args.depth} depth")
     model, bare = build_network(args, train_ds.cfg.in_channels, device, distributed)
     amp = device.type == "cuda" and not args.no_amp
     spe = train_ds.steps_per_epoch(args.workers)

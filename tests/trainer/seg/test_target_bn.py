@@ -120,8 +120,8 @@ def test_seg_bn_target_runs_after_training_and_is_recorded(trained, tmp_path):
     _photos(tmp_path / "site", 3, level=220)
     run = tmp_path / "run"
     assert main(["seg", "--real", str(trained["real"]), "--arch", "unet", "-b", "2", "--crop", "32", "-j", "0",
-                 "--no-progress", "--max-steps", "2", "--bn-target", str(tmp_path / "site"),
-                 "--bn-target-batches", "2", "--out", str(run)]) == 0
+                 "--no-progress", "--max-steps", "2", "--target", str(tmp_path / "site"), "--target-bn",
+                 "--target-bn-batches", "2", "--out", str(run)]) == 0
     ckpt = load_checkpoint(run / "checkpoint.pt")
     assert ckpt["target_bn"]["photos"] == 3 and ckpt["target_bn"]["batches"] == 2
     plain = load_checkpoint(trained["ckpt"])  # the same training without --bn-target: same weights, other BN
@@ -134,7 +134,22 @@ def test_seg_bn_target_is_checked_before_training(trained, tmp_path, capsys):
     run = tmp_path / "run"
     assert main(["seg", "--real", str(trained["real"]), "--arch", "unet", "-b", "2", "--crop", "32", "-j", "0",
                  "--no-progress", "--max-steps", "2", "--bn-target", str(tmp_path / "nope"), "--out", str(run)]) == 1
-    assert "no such folder" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "no such folder" in err and "--bn-target is deprecated" in err  # the old spelling still works
+    assert not (run / "checkpoint.pt").exists()
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--target", "photos"], "needs --target-appearance and/or --target-bn"),
+    (["--target-bn"], "need --target FOLDER"),
+    (["--target", "a", "--target-bn", "--bn-target", "b"], "two site photo folders"),
+])
+def test_seg_site_target_flags_must_fit_together(trained, tmp_path, capsys, flags, message):
+    run = tmp_path / "run"
+    assert main(["seg", "--real", str(trained["real"]), "--arch", "unet", "-b", "2", "--crop", "32", "-j", "0",
+                 "--no-progress", "--max-steps", "1", *flags, "--out", str(run)]) == 1
+    err = [line for line in capsys.readouterr().err.splitlines() if "deprecated" not in line]
+    assert len(err) == 1 and message in err[0]
     assert not (run / "checkpoint.pt").exists()
 
 
