@@ -2,12 +2,16 @@
 as hidden aliases that print one deprecation line, and the renamed commands."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from crackgen.tools.cli import build_parser as crackgen_parser
 from crackgen.tools.cli import main as crackgen_main
 from trainer.cli import build_parser as cracktrain_parser
 from trainer.cli import main as cracktrain_main
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize("argv, dest, value, old", [
@@ -78,7 +82,7 @@ def test_renamed_command_and_positional_checkpoint_still_work(tmp_path, capsys):
 def test_bench_component_runs_one_component_alone(tmp_path, capsys):
     assert crackgen_main(["bench", "--component", "shards", "--component-args", "--size 32 --samples 1"]) == 0
     assert '"bytes_per_sample"' in capsys.readouterr().out
-    assert crackgen_main(["bench", "recipes/demo.toml", "--component", "core"]) == 1
+    assert crackgen_main(["bench", str(ROOT / "recipes" / "demo.toml"), "--component", "core"]) == 1
     assert "not both" in capsys.readouterr().err
     assert crackgen_main(["bench"]) == 1
     assert crackgen_main(["bench", "--component", "core", "--component-args=--no-such-flag"]) == 1

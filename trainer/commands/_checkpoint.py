@@ -7,14 +7,14 @@ from crackgen.cli_aliases import deprecation_note
 from trainer.core.errors import TrainerInputError
 
 
-def resolve_checkpoint(args: argparse.Namespace, command: str) -> str:
-    """Set and return ``args.checkpoint``; one line when it is missing or given twice differently."""
+def resolve_checkpoint(args: argparse.Namespace, command: str, dest: str = "checkpoint") -> str:
+    """Set and return ``args.<dest>`` (``--checkpoint``); one line when it is missing or given twice differently."""
     old = getattr(args, "model", None)
     if old is not None:
-        if args.checkpoint is not None and args.checkpoint != old:
-            raise TrainerInputError(f"two checkpoints given ({old} and --checkpoint {args.checkpoint}): give one")
+        if getattr(args, dest) is not None and getattr(args, dest) != old:
+            raise TrainerInputError(f"two checkpoints given ({old} and --checkpoint {getattr(args, dest)}): give one")
         deprecation_note("cracktrain", f"{command} CHECKPOINT (positional)", f"{command} --checkpoint CHECKPOINT")
-        args.checkpoint = old
-    if args.checkpoint is None:
+        setattr(args, dest, old)
+    if getattr(args, dest) is None:
         raise TrainerInputError("--checkpoint is required")
-    return args.checkpoint
+    return getattr(args, dest)

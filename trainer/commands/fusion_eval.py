@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from trainer.core.errors import TrainerInputError
+from trainer.commands._checkpoint import resolve_checkpoint
 
 NAME = "fusion-eval"
 HELP = "thesis-style table: stereo, ToF/LiDAR, fused max/weighted, + BM3D"
@@ -18,8 +18,7 @@ def add_args(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from trainer.depthfusion.evaluate import run_fusion_eval
 
-    if args.ckpt is None:
-        raise TrainerInputError("--checkpoint is required")
+    resolve_checkpoint(args, NAME, dest="ckpt")
     res = run_fusion_eval(args)
     print(f"{res['variant']} fusion, {res['scenes']} {'held-out ' if res['keys'] == 'val' else ''}scenes of "
           f"{res['data']} (disparity px, mean over scenes)")

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from trainer.core.errors import TrainerInputError
+from trainer.commands._checkpoint import resolve_checkpoint
 
 NAME = "fuse"
 HELP = "fuse a stereo and a ToF/LiDAR disparity file with a trained confidence CNN"
@@ -19,8 +19,7 @@ def run(args: argparse.Namespace) -> int:
     from fusion.depth.metrics import format_table
     from trainer.depthfusion.apply import run_fuse
 
-    if args.ckpt is None:
-        raise TrainerInputError("--checkpoint is required")
+    resolve_checkpoint(args, NAME, dest="ckpt")
     res = run_fuse(args)
     if "metrics" in res:
         print(format_table(res["metrics"]))

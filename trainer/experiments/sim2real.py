@@ -273,10 +273,6 @@ def train_and_score(ns: argparse.Namespace, sets: RealSets, args: argparse.Names
             **choose_and_score(Path(ns.out) / "checkpoint.pt", sets, args, device)}
 
 
-def _device(args: argparse.Namespace) -> torch.device:
-    return pick_device(args.device)
-
-
 # ------------------------------------------------------------------ the rows
 
 def wanted_runs(args: argparse.Namespace) -> list[str]:
@@ -413,7 +409,7 @@ def run_sim2real(args: argparse.Namespace) -> dict[str, Any]:
     sets = real_sets_for(args, out)
     targets = adaptation_targets(args, sets.train_stems) \
         if any(r in TARGET_RUNS or r == "finetune" for r in runs) else None
-    device = _device(args)
+    device = pick_device(args.device)
     results: dict[str, Any] = {}
     cfg = DataOptions.from_args(args)
     table = {"arch": args.arch, "channels": cfg.channels, "depth": args.depth, "depth_norm": cfg.depth_norm,
@@ -580,7 +576,7 @@ def run_curve(args: argparse.Namespace) -> dict[str, Any]:
     cross = cross_domain_sets(args.cross, args, args.real_root)
     targets = adaptation_targets(args, sets.train_stems)
     steps = args.curve_steps or args.max_steps
-    device = _device(args)
+    device = pick_device(args.device)
     check_curve_settings(args, out, targets)
     done = {(p.n, p.repeat, p.arm): p for p in read_csv(out / "curve.csv")}
     t_start = time.perf_counter()

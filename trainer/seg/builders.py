@@ -124,11 +124,11 @@ class DataOptions:
         return cls(
             depth=args.depth, valid_channel=resolve_valid_channel(args.depth, args.valid_channel),
             image_dir=args.image_dir, mask_dir=args.mask_dir, mask_suffix=args.mask_suffix,
-            ignore_dir=getattr(args, "ignore_dir", "ignore"), real_depth_dir=args.real_depth_dir,
+            ignore_dir=args.ignore_dir, real_depth_dir=args.real_depth_dir,
             real_depth_kind=args.real_depth_kind, real_depth_scale=args.real_depth_scale, focal_px=args.focal_px,
             baseline_m=args.baseline_m, depth_near=args.depth_near, depth_far=args.depth_far,
             depth_norm=args.depth_norm, relief=args.relief, relief_range_mm=args.relief_range_mm,
-            relief_sigma=args.relief_sigma, mask_member=getattr(args, "mask_member", None) or DEFAULT_MASK_MEMBER,
+            relief_sigma=args.relief_sigma, mask_member=args.mask_member or DEFAULT_MASK_MEMBER,
             size=args.size, skip_bad=args.skip_bad,
             group_pattern=getattr(args, "group_pattern", DEFAULT_GROUP_PATTERN),
         )
