@@ -15,8 +15,10 @@ def add_args(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from trainer.core.options import options_from
     from trainer.experiments.bench import format_bench, run_bench
+    from trainer.experiments.config import BenchOptions
 
-    res = run_bench(args)
+    res = run_bench(options_from(BenchOptions, args))
     print(json.dumps(res, indent=2) if args.json else format_bench(res))
     return 0

@@ -15,9 +15,11 @@ def add_args(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from trainer.core.options import options_from
     from trainer.experiments.benchmark import run_benchmark
+    from trainer.experiments.config import BenchmarkOptions
 
-    r = run_benchmark(args)
+    r = run_benchmark(options_from(BenchmarkOptions, args))
     print(Path(r["out"], "benchmark.md").read_text())
     print(f"scored {r['models']} models ({r['labels']} rows) on {len(r['sets'])} sets in {r['seconds']} s; "
           f"wrote {r['out']}/benchmark.csv, .md, .png, .json")

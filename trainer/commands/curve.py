@@ -15,9 +15,11 @@ def add_args(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from trainer.core.options import options_from
+    from trainer.experiments.config import CurveOptions
     from trainer.experiments.sim2real import run_curve
 
-    res = run_curve(args)
+    res = run_curve(options_from(CurveOptions, args))
     report = Path(res["out"]) / "curve.md"
     print(report.read_text())
     print(f"wrote {res['out']}/curve.csv, curve.md, curve.png, curve.json")

@@ -14,9 +14,11 @@ def add_args(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from trainer.core.options import options_from
+    from trainer.seg.config import EvaluateOptions
     from trainer.seg.evaluate import run_evaluate
 
-    s = run_evaluate(args)
+    s = run_evaluate(options_from(EvaluateOptions, args))
     a, b = s["at_threshold"], s["best"]
     print(f"@{a['threshold']:.2f} ({s['threshold_source']}): acc {a['accuracy']:.4f} P {a['precision']:.4f} "
           f"R {a['recall']:.4f} F1 {a['f1']:.4f} IoU {a['iou']:.4f}")

@@ -14,9 +14,11 @@ def add_args(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from trainer.core.options import options_from
+    from trainer.depthfusion.config import FusionTrainConfig
     from trainer.depthfusion.train import main as fusion_main
 
-    res = fusion_main(args)
+    res = fusion_main(options_from(FusionTrainConfig, args))
     b = res["best"]
     best = (f"; best held-out fused-max MAE {b['val_mae_fused_max']:.4f} px at step {b['step']} "
             f"(stereo {b['val_mae_stereo']:.4f}, other {b['val_mae_other']:.4f})") if "step" in b else ""

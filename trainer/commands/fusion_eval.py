@@ -16,10 +16,12 @@ def add_args(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from trainer.core.options import options_from
+    from trainer.depthfusion.config import FusionEvalOptions
     from trainer.depthfusion.evaluate import run_fusion_eval
 
     resolve_checkpoint(args, NAME, dest="ckpt")
-    res = run_fusion_eval(args)
+    res = run_fusion_eval(options_from(FusionEvalOptions, args))
     print(f"{res['variant']} fusion, {res['scenes']} {'held-out ' if res['keys'] == 'val' else ''}scenes of "
           f"{res['data']} (disparity px, mean over scenes)")
     print(res["table"])

@@ -17,10 +17,12 @@ def add_args(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fusion.depth.metrics import format_table
+    from trainer.core.options import options_from
     from trainer.depthfusion.apply import run_fuse
+    from trainer.depthfusion.config import FuseOptions
 
     resolve_checkpoint(args, NAME, dest="ckpt")
-    res = run_fuse(args)
+    res = run_fuse(options_from(FuseOptions, args))
     if "metrics" in res:
         print(format_table(res["metrics"]))
     print(f"wrote {', '.join(res['written'])} to {res['out']}")

@@ -14,7 +14,9 @@ def add_args(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from trainer.core.options import options_from
+    from trainer.seg.config import PredictOptions
     from trainer.seg.predict import run_predict
 
-    print(run_predict(args).summary())
+    print(run_predict(options_from(PredictOptions, args)).summary())
     return 0

@@ -17,9 +17,11 @@ def add_args(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import torch.distributed as dist
 
+    from trainer.core.options import options_from
+    from trainer.seg.config import SegTrainConfig
     from trainer.seg.train import main as train_main
 
-    res = train_main(args)
+    res = train_main(options_from(SegTrainConfig, args))
     distributed = dist.is_available() and dist.is_initialized()
     if not distributed or dist.get_rank() == 0:
         print(json.dumps({k: res[k] for k in ("step", "epoch", "best", "out")}))

@@ -17,14 +17,16 @@ def add_args(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from trainer.core.options import options_from
+    from trainer.experiments.config import ExperimentOptions
     from trainer.experiments.sim2real import run_curve, run_sim2real
 
     if args.curve:  # the old spelling of `cracktrain curve`
         deprecation_note("cracktrain", "sim2real --curve", "cracktrain curve --sizes")
-        res = run_curve(args)
+        res = run_curve(options_from(ExperimentOptions, args))
         report = Path(res["out"]) / "curve.md"
     else:
-        run_sim2real(args)
+        run_sim2real(options_from(ExperimentOptions, args))
         report = Path(args.out) / "sim2real.md"
     print(report.read_text())
     print(f"wrote {report.parent}")

@@ -29,6 +29,7 @@ from trainer.core.checkpoint import load_checkpoint
 from trainer.core.device import pick_device
 from trainer.core.errors import TrainerInputError
 from trainer.core.imageio import read_float_map, read_rgb
+from trainer.depthfusion.config import FuseOptions
 from trainer.depthfusion.model import THESIS, ConfidenceCNN
 from trainer.depthfusion.train import predict_confidence
 
@@ -44,7 +45,7 @@ def load_fusion_model(path: str | Path, device: torch.device) -> tuple[Confidenc
     return model.to(device).eval(), cfg, ckpt
 
 
-def post_filter_from_args(args: argparse.Namespace) -> PostFilter | None:
+def post_filter_from_args(args: FuseOptions) -> PostFilter | None:
     if args.post == "none":
         return None
     try:
@@ -138,7 +139,7 @@ def write_maps(out: Path, maps: dict[str, np.ndarray]) -> list[Path]:
     return paths
 
 
-def run_fuse(args: argparse.Namespace) -> dict[str, Any]:
+def run_fuse(args: FuseOptions) -> dict[str, Any]:
     device = pick_device(args.device)
     model, cfg, _ = load_fusion_model(args.ckpt, device)
     variant = cfg["variant"]

@@ -28,8 +28,9 @@ from fusion.depth.postfilter import PostFilter
 from trainer.core.device import pick_device
 from trainer.core.errors import TrainerInputError
 from trainer.depthfusion.apply import add_stereo_holes_arg, fuse_scene, load_fusion_model
+from trainer.depthfusion.config import FusionEvalOptions
 from trainer.depthfusion.data import load_shard_scenes, shard_keys
-from trainer.depthfusion.real_scenes import add_real_args, real_scene
+from trainer.depthfusion.real_scenes import SimulatedLidar, add_real_args, real_scene
 
 
 def add_fusion_eval_args(p: argparse.ArgumentParser) -> None:
@@ -68,7 +69,7 @@ def evaluate_scene(model, cfg, scene, device, filters: dict[str, PostFilter],
     return rows
 
 
-def run_fusion_eval(args: argparse.Namespace) -> dict[str, Any]:
+def run_fusion_eval(args: FusionEvalOptions) -> dict[str, Any]:
     if args.threads > 0:
         torch.set_num_threads(args.threads)
     device = pick_device(args.device)
@@ -77,7 +78,8 @@ def run_fusion_eval(args: argparse.Namespace) -> dict[str, Any]:
         if cfg["variant"] not in LIDAR_VARIANTS:
             raise TrainerInputError(f"--real-stereo simulates a LiDAR: {args.ckpt} is a {cfg['variant']} model")
         data = ", ".join(str(Path(f).name) for f in args.real_stereo)
-        scenes = [real_scene(f, args, cfg["densify"], cfg["variant"], cfg.get("other_bm3d", 0.0))
+        lidar_sim = SimulatedLidar(args.lidar_lines, args.lidar_sigma_px, args.lidar_dropout, args.seed)
+        scenes = [real_scene(f, lidar_sim, cfg["densify"], cfg["variant"], cfg.get("other_bm3d", 0.0))
                   for f in args.real_stereo]
     else:
         data = args.data or ckpt["args"].get("data")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import zlib
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -63,12 +64,22 @@ def load_real_pair(folder: str | Path) -> tuple[str, np.ndarray, np.ndarray, np.
                             f"(disp_left.tif)")
 
 
-def real_scene(folder: str | Path, args: argparse.Namespace, densify: str, variant: str = "lidar",
+@dataclass(frozen=True)
+class SimulatedLidar:
+    """The scan-line LiDAR simulated from a real scene's GT disparity (``fusion-eval --lidar-*``)."""
+
+    lines: int = 32
+    sigma_px: float = 0.25
+    dropout: float = 0.1
+    seed: int = 0
+
+
+def real_scene(folder: str | Path, lidar_sim: SimulatedLidar, densify: str, variant: str = "lidar",
                other_bm3d: float = 0.0) -> FusionScene:
     name, left, right, gt = load_real_pair(folder)
     stereo = sgbm_disparity(left, right, num_disparities=search_range(gt, gt.shape[1]))
-    rng = np.random.default_rng(np.random.SeedSequence([args.seed, zlib.crc32(name.encode())]))
-    lidar = scanline_lidar(gt, args.lidar_lines, rng, args.lidar_sigma_px, args.lidar_dropout)
+    rng = np.random.default_rng(np.random.SeedSequence([lidar_sim.seed, zlib.crc32(name.encode())]))
+    lidar = scanline_lidar(gt, lidar_sim.lines, rng, lidar_sim.sigma_px, lidar_sim.dropout)
     try:
         inp = build_inputs(variant, stereo, lidar, left, right, None, densify, other_bm3d)
     except FusionInputError as exc:

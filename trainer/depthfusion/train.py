@@ -36,7 +36,9 @@ from trainer.core.checkpoint import load_checkpoint, save_checkpoint
 from trainer.core.device import pick_device
 from trainer.core.errors import TrainerInputError
 from trainer.core.holdout import split_fraction
+from trainer.core.options import options_dict
 from trainer.depthfusion.augment import corrupt_scene_stereo, corrupt_stereo
+from trainer.depthfusion.config import FusionTrainConfig
 from trainer.depthfusion.data import (
     DISP_REFS,
     FusionScene,
@@ -110,7 +112,7 @@ def add_fusion_args(p: argparse.ArgumentParser) -> None:
 class FusionRun:
     """The fixed pieces of a run."""
 
-    args: argparse.Namespace
+    args: FusionTrainConfig
     device: torch.device
     train: list[FusionScene]
     val: list[FusionScene]
@@ -122,7 +124,7 @@ class FusionRun:
 
 # ------------------------------------------------------------------ building blocks
 
-def build_split(args: argparse.Namespace) -> tuple[list[str], list[str]]:
+def build_split(args: FusionTrainConfig) -> tuple[list[str], list[str]]:
     keys = shard_keys(args.data)
     if len(keys) < 2:
         raise TrainerInputError(f"--data {args.data} has {len(keys)} sample(s); fusion training needs at least 2")
@@ -132,7 +134,7 @@ def build_split(args: argparse.Namespace) -> tuple[list[str], list[str]]:
     return train_keys, val_keys
 
 
-def build_optimizer(args: argparse.Namespace, model: torch.nn.Module) -> torch.optim.Optimizer:
+def build_optimizer(args: FusionTrainConfig, model: torch.nn.Module) -> torch.optim.Optimizer:
     if args.optimizer == "adadelta":
         return torch.optim.Adadelta(model.parameters(), lr=args.lr)
     return torch.optim.Adam(model.parameters(), lr=args.lr)
@@ -146,7 +148,7 @@ def sample_config(variant: str, mean: Sequence[float], std: Sequence[float], den
             "dilations": list(DILATIONS[dilations]), "receptive_field_px": receptive_field(DILATIONS[dilations])}
 
 
-def make_batch(scenes: Sequence[FusionScene], args: argparse.Namespace, step: int, mean, std
+def make_batch(scenes: Sequence[FusionScene], args: FusionTrainConfig, step: int, mean, std
                ) -> tuple[torch.Tensor, torch.Tensor]:
     """(x [B,C,P,P] normalised, target [B,2,P,P] with NaN where the GT has no value) for ``step``."""
     rng = np.random.default_rng(np.random.SeedSequence([args.seed, step]))
@@ -214,12 +216,12 @@ def validate(run: FusionRun) -> dict[str, float]:
 
 def checkpoint_payload(run: FusionRun, step: int, best: dict[str, Any], val_keys: list[str]) -> dict[str, Any]:
     return {"model": run.model.state_dict(), "optimizer": run.optimizer.state_dict(), "step": step,
-            "args": vars(run.args), "sample_config": sample_config(run.args.variant, run.mean, run.std, run.args.densify,
+            "args": options_dict(run.args), "sample_config": sample_config(run.args.variant, run.mean, run.std, run.args.densify,
                                                            run.args.disp_ref, run.args.other_bm3d, run.args.dilations),
             "best": best, "val_keys": val_keys, "train_keys": [s.key for s in run.train]}
 
 
-def check_resume(args: argparse.Namespace, ckpt: dict[str, Any]) -> None:
+def check_resume(args: FusionTrainConfig, ckpt: dict[str, Any]) -> None:
     old = ckpt["args"]
     changed = [k for k, before in RESUME_FIXED_ARGS.items() if old.get(k, before) != getattr(args, k)]
     if changed:
@@ -230,7 +232,7 @@ def check_resume(args: argparse.Namespace, ckpt: dict[str, Any]) -> None:
 
 # ------------------------------------------------------------------ main
 
-def main(args: argparse.Namespace) -> dict[str, Any]:
+def main(args: FusionTrainConfig) -> dict[str, Any]:
     if args.threads > 0:
         torch.set_num_threads(args.threads)
     if args.batch_size < 1 or args.patch < 8 or args.steps < 0:

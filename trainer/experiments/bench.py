@@ -17,6 +17,7 @@ from torch.utils.data import DataLoader
 
 from trainer.core.device import pick_device
 from trainer.core.errors import TrainerInputError
+from trainer.experiments.config import BenchOptions
 from trainer.seg.builders import DataOptions, add_data_args, real_folder, sample_config, shard_source
 from trainer.seg.losses import make_loss
 from trainer.seg.models import ARCHS, build_model
@@ -104,10 +105,9 @@ def bench_fusion_model(variant: str, size: int, batch: int, steps: int, device: 
             "step_s_min": round(min(times), 4), "params_M": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
 
 
-def run_bench(args: argparse.Namespace) -> dict[str, Any]:
+def run_bench(args: BenchOptions) -> dict[str, Any]:
     opts = DataOptions.from_args(args)
-    cfg = sample_config(opts, crop=getattr(args, "crop", None), rotate_deg=getattr(args, "rotate_deg", 15.0),
-                        jitter=getattr(args, "jitter", 0.3))
+    cfg = sample_config(opts, crop=args.crop, rotate_deg=15.0, jitter=0.3)  # seg's training augmentation
     res: dict[str, Any] = {"loader": [], "model": None}
     if args.data or args.real:
         shards = shard_source(opts, args.data) if args.data else None

@@ -26,6 +26,7 @@ from tqdm import tqdm
 from trainer.core.checkpoint import load_checkpoint
 from trainer.core.device import pick_device
 from trainer.core.errors import TrainerInputError
+from trainer.experiments.config import BenchmarkOptions
 from trainer.experiments.error_overlays import describe_errors
 from trainer.experiments.eval_sets import (
     CROSS_DOMAIN_SETS,
@@ -95,7 +96,7 @@ def expand_model(spec: str) -> list[tuple[str, Path]]:
     raise TrainerInputError(f"model {where}: not a checkpoint, a run folder with checkpoint.pt or a sim2real folder")
 
 
-def build_entries(args: argparse.Namespace, device: torch.device, sets: list[EvalSet]) -> list[ModelEntry]:
+def build_entries(args: BenchmarkOptions, device: torch.device, sets: list[EvalSet]) -> list[ModelEntry]:
     entries, val_set = [], None
     for spec in args.models:
         for label, path in expand_model(spec):
@@ -142,7 +143,7 @@ def _slug(text: str) -> str:
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)
 
 
-def run_benchmark(args: argparse.Namespace) -> dict[str, Any]:
+def run_benchmark(args: BenchmarkOptions) -> dict[str, Any]:
     out = Path(args.out)
     device = pick_device(args.device)
     specs = args.sets or list(DEFAULT_SETS)

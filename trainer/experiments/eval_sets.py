@@ -11,13 +11,13 @@ A model is never scored on a set that holds a photo group it was trained on
 """
 from __future__ import annotations
 
-import argparse
 import logging
 from pathlib import Path
 from typing import Any
 
 from trainer.core.checkpoint import load_checkpoint
 from trainer.core.errors import TrainerInputError
+from trainer.experiments.config import BenchmarkOptions, ExperimentOptions
 from trainer.experiments.scoreboard import EvalSet
 from trainer.seg.real_split import SIDES, compile_group_pattern, group_of, split_groups
 from trainer.seg.sources import RealFolder
@@ -31,8 +31,9 @@ CROSS_DOMAIN_SETS = ("masonry_dais=crossdomain/masonry_dais", "shadowcrack_test=
                      "aiglern_test=crossdomain/aiglern_test")
 
 
-def parse_set(spec: str, args: argparse.Namespace, real_root: str | Path = DEFAULT_REAL_ROOT) -> EvalSet:
-    """``NAME=FOLDER[@SIDE]`` -> a checked set (every image has its mask, by name)."""
+def parse_set(spec: str, args: BenchmarkOptions | ExperimentOptions, real_root: str | Path = DEFAULT_REAL_ROOT) -> EvalSet:
+    """``NAME=FOLDER[@SIDE]`` -> a checked set (every image has its mask, by name); ``args`` gives the folder
+    layout and the grouped split that ``@val`` / ``@test`` name."""
     name, sep, where = spec.partition("=")
     if not sep or not name.strip() or not where.strip():
         raise TrainerInputError(f"set {spec!r}: expected NAME=FOLDER or NAME=FOLDER@test")
@@ -61,7 +62,7 @@ def parse_set(spec: str, args: argparse.Namespace, real_root: str | Path = DEFAU
     return EvalSet(name.strip(), folder, desc)
 
 
-def cross_domain_sets(specs: list[str] | None, args: argparse.Namespace, real_root: str | Path) -> list[EvalSet]:
+def cross_domain_sets(specs: list[str] | None, args: BenchmarkOptions | ExperimentOptions, real_root: str | Path) -> list[EvalSet]:
     """``--cross`` sets: the given specs, none for ``['none']``, else the three cross-domain sets."""
     if specs and [s.lower() for s in specs] == ["none"]:
         return []

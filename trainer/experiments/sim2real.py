@@ -41,6 +41,7 @@ such as Syncrack): it trains the ``synthetic`` row only.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import math
@@ -57,6 +58,8 @@ from trainer.adapt.pseudo_label import PseudoSettings, write_pseudo_folder
 from trainer.core.checkpoint import load_checkpoint, steps_seen
 from trainer.core.device import pick_device
 from trainer.core.errors import TrainerInputError
+from trainer.core.options import options_from
+from trainer.experiments.config import ExperimentOptions
 from trainer.experiments.curve import (
     CurvePoint,
     headline,
@@ -79,14 +82,15 @@ from trainer.seg.builders import (
     grouped_split,
     real_folder,
 )
+from trainer.seg.config import SegTrainConfig
 from trainer.seg.metrics import ConfusionHistogram
 from trainer.seg.real_split import RealSplit, split_groups
 from trainer.seg.scoring import evaluate, load_model, report
 from trainer.seg.sources import RealFolder
 from trainer.seg.stream import SegStream
 from trainer.seg.threshold import choose_threshold, store_threshold
-from trainer.seg.train import add_seg_args, precise_bn_batches
 from trainer.seg.train import main as train_seg
+from trainer.seg.train import precise_bn_batches
 
 log = logging.getLogger(__name__)
 
@@ -184,24 +188,19 @@ def add_curve_args(p: argparse.ArgumentParser) -> None:
 
 # ------------------------------------------------------------------ shared steps
 
-def seg_args(args: argparse.Namespace, out: Path, data: str | None, real: str | None, stems: list[str] | None,
-             **overrides: Any) -> argparse.Namespace:
-    """``cracktrain seg`` arguments for one training of this comparison."""
-    p = argparse.ArgumentParser()
-    add_seg_args(p)
-    ns = p.parse_args([])
-    for k, v in vars(args).items():
-        if hasattr(ns, k) and k not in ("out", "real"):
-            setattr(ns, k, v)
-    ns.data, ns.real, ns.real_stems, ns.out = data, real, stems, str(out)
-    ns.precise_bn = args.precise_bn  # every row alike (seg's own default skips it without --init)
-    ns.val_fraction, ns.val_data, ns.val_real, ns.resume, ns.test_only = 0.0, None, None, None, False
-    ns.adapt_target, ns.adapt_targets, ns.init = None, None, None
-    ns.bn_target, ns.bn_targets = None, None
-    ns.target, ns.target_appearance, ns.target_bn = None, False, False  # sim2real's --target means its own rows
-    for k, v in overrides.items():
-        setattr(ns, k, v)
-    return ns
+def seg_args(args: ExperimentOptions, out: Path, data: str | None, real: str | None, stems: list[str] | None,
+             **overrides: Any) -> SegTrainConfig:
+    """``cracktrain seg`` settings for one training of this comparison: the shared flags as given, seg's own
+    defaults for the rest."""
+    shared = {f.name: getattr(args, f.name) for f in dataclasses.fields(SegTrainConfig)
+              if hasattr(args, f.name) and f.name not in ("out", "real")}
+    fixed = {"data": data, "real": real, "real_stems": stems, "out": str(out),
+             "precise_bn": args.precise_bn,  # every row alike (seg's own default skips it without --init)
+             "val_fraction": 0.0, "val_data": None, "val_real": None, "resume": None, "test_only": False,
+             "adapt_target": None, "adapt_targets": None, "init": None, "bn_target": None, "bn_targets": None,
+             # sim2real's --target means its own rows
+             "target": None, "target_appearance": False, "target_bn": False}
+    return SegTrainConfig(**(shared | fixed | overrides))
 
 
 @dataclass
@@ -215,7 +214,7 @@ class RealSets:
     split: RealSplit
 
 
-def real_sets_for(args: argparse.Namespace, out: Path) -> RealSets:
+def real_sets_for(args: ExperimentOptions, out: Path) -> RealSets:
     """Grouped split of ``--real`` (train / val / test, or train / val with ``--real-test``), written to OUT."""
     if args.real_test:
         split = split_groups(real_folder(DataOptions.from_args(args), args.real).keys, val_fraction=args.val_fraction, test_fraction=0.0,
@@ -235,7 +234,7 @@ def real_sets_for(args: argparse.Namespace, out: Path) -> RealSets:
     return RealSets(split.train, real_folder(DataOptions.from_args(args), args.real, split.val), test, test_root, split)
 
 
-def adaptation_targets(args: argparse.Namespace, train_stems: list[str] | None) -> tuple[str, ...] | None:
+def adaptation_targets(args: ExperimentOptions, train_stems: list[str] | None) -> tuple[str, ...] | None:
     """Target photos: ``--target FOLDER``, or the real training split's images (never the test split's)."""
     if args.target is None:
         return None
@@ -245,14 +244,14 @@ def adaptation_targets(args: argparse.Namespace, train_stems: list[str] | None) 
     return targets_from_paths([folder.image_path(k) for k in folder.keys])
 
 
-def histogram(checkpoint: Path, folder: RealFolder, args: argparse.Namespace,
+def histogram(checkpoint: Path, folder: RealFolder, args: ExperimentOptions,
               device: torch.device) -> ConfusionHistogram:
     model, cfg, _ = load_model(checkpoint, device)
     ds = SegStream(cfg, None, folder, train=False, seed=args.seed, skip_bad=args.skip_bad)
     return evaluate(model, eval_loader(ds, args.workers, device), device, device.type == "cuda")
 
 
-def choose_and_score(checkpoint: Path, sets: RealSets, args: argparse.Namespace, device: torch.device,
+def choose_and_score(checkpoint: Path, sets: RealSets, args: ExperimentOptions, device: torch.device,
                      store: bool = True) -> dict[str, Any]:
     """Threshold from the validation split (stored in the checkpoint unless ``store`` is off: a checkpoint
     the user handed in is never rewritten), then one score of the test split."""
@@ -266,7 +265,7 @@ def choose_and_score(checkpoint: Path, sets: RealSets, args: argparse.Namespace,
             "test": r["at_threshold"], "at_0.5": r["at_0.5"], "oracle": r["oracle"]}
 
 
-def train_and_score(ns: argparse.Namespace, sets: RealSets, args: argparse.Namespace,
+def train_and_score(ns: SegTrainConfig, sets: RealSets, args: ExperimentOptions,
                     device: torch.device) -> dict[str, Any]:
     info = train_seg(ns)
     return {"steps": info["step"], "train_seconds": round(info["seconds"], 1),
@@ -275,7 +274,7 @@ def train_and_score(ns: argparse.Namespace, sets: RealSets, args: argparse.Names
 
 # ------------------------------------------------------------------ the rows
 
-def wanted_runs(args: argparse.Namespace) -> list[str]:
+def wanted_runs(args: ExperimentOptions) -> list[str]:
     if args.runs is None:
         return list(BASE_RUNS) + (list(DEFAULT_TARGET_RUNS) if args.target is not None else [])
     runs = [r.strip() for r in args.runs.split(",") if r.strip()]
@@ -293,7 +292,7 @@ def synthetic_is_folder(path: str | None) -> bool:
         and not (Path(path) / "manifest.json").is_file()
 
 
-def run_row(name: str, args: argparse.Namespace, out: Path, sets: RealSets,
+def run_row(name: str, args: ExperimentOptions, out: Path, sets: RealSets,
             targets: tuple[str, ...] | None, device: torch.device) -> dict[str, Any]:
     """Train and score one row; a row that needs synthetic shards is skipped without them."""
     if name != "real" and not args.synthetic and not (name == "finetune" and args.pretrained):
@@ -344,7 +343,7 @@ def run_row(name: str, args: argparse.Namespace, out: Path, sets: RealSets,
     return res
 
 
-def finetune_pretrained_row(args: argparse.Namespace, out: Path, name: str, stems: list[str] | None,
+def finetune_pretrained_row(args: ExperimentOptions, out: Path, name: str, stems: list[str] | None,
                             sets: RealSets, device: torch.device) -> dict[str, Any]:
     """``--pretrained CKPT`` fine-tuned on the real split for all ``--max-steps``."""
     pre_step = steps_seen(load_checkpoint(args.pretrained))  # with its own --init chain
@@ -355,7 +354,7 @@ def finetune_pretrained_row(args: argparse.Namespace, out: Path, name: str, stem
     return res
 
 
-def target_bn_row(args: argparse.Namespace, out: Path, targets: tuple[str, ...] | None, sets: RealSets,
+def target_bn_row(args: ExperimentOptions, out: Path, targets: tuple[str, ...] | None, sets: RealSets,
                   device: torch.device) -> dict[str, Any]:
     """The ``synthetic`` row's model (trained here unless that row already finished) with BN statistics
     from the target photos: what target BN alone is worth, on identical weights."""
@@ -372,7 +371,7 @@ def target_bn_row(args: argparse.Namespace, out: Path, targets: tuple[str, ...] 
             **res, "target_bn": record}
 
 
-def pseudo_label_row(args: argparse.Namespace, out: Path, targets: tuple[str, ...] | None, sets: RealSets,
+def pseudo_label_row(args: ExperimentOptions, out: Path, targets: tuple[str, ...] | None, sets: RealSets,
                      device: torch.device) -> dict[str, Any]:
     """The ``synthetic`` row's model (trained here unless finished), then ``--self-train-steps`` on the renders
     plus the target photos pseudo-labelled by that model (``trainer.adapt.pseudo_label``)."""
@@ -399,7 +398,7 @@ def pseudo_label_row(args: argparse.Namespace, out: Path, targets: tuple[str, ..
     return res
 
 
-def run_sim2real(args: argparse.Namespace) -> dict[str, Any]:
+def run_sim2real(args: ExperimentOptions) -> dict[str, Any]:
     if args.curve:
         return run_curve(args)
     if args.pretrained and not Path(args.pretrained).is_file():
@@ -451,14 +450,14 @@ def earlier_rows(out: Path, table: dict[str, Any], runs: list[str]) -> dict[str,
     return kept
 
 
-def describe_target(args: argparse.Namespace, targets: tuple[str, ...] | None) -> str | None:
+def describe_target(args: ExperimentOptions, targets: tuple[str, ...] | None) -> str | None:
     if targets is None:
         return None
     where = args.target or "the real training split's images (labels unused)"
     return f"{where}: {len(targets)} photos"
 
 
-def rows_markdown(args: argparse.Namespace, table: dict[str, Any]) -> list[str]:
+def rows_markdown(args: ExperimentOptions, table: dict[str, Any]) -> list[str]:
     lines = [f"# Sim-to-real: {args.arch}, {args.max_steps} steps, batch {args.batch_size}, crop {args.crop}, "
              f"seed {args.seed}", "",
              f"Input {table['channels']} (depth {table['depth']}, {table['depth_norm']}); synthetic labels "
@@ -492,7 +491,7 @@ CURVE_SETTINGS = ("synthetic", "real", "real_test", "test_fraction", "val_fracti
                   "depth", "depth_norm", "mask_member", "precise_bn", "pretrained", "lr_scheduler", "cross")
 
 
-def check_curve_settings(args: argparse.Namespace, out: Path, targets: tuple[str, ...] | None) -> None:
+def check_curve_settings(args: ExperimentOptions, out: Path, targets: tuple[str, ...] | None) -> None:
     """Record the settings in ``out``, or refuse (one line) to continue a curve made with other ones."""
     now = {k: getattr(args, k, None) for k in CURVE_SETTINGS} | {"target": describe_target(args, targets)}
     path = out / "curve_settings.json"
@@ -509,29 +508,29 @@ def check_curve_settings(args: argparse.Namespace, out: Path, targets: tuple[str
                                 "use a new --out or the same settings")
 
 
-def train_or_reuse(ns: argparse.Namespace) -> dict[str, Any]:
+def train_or_reuse(ns: SegTrainConfig) -> dict[str, Any]:
     """Train, unless ``ns.out`` already holds this training: finished (kept) or interrupted (resumed)."""
     path = Path(ns.out) / "checkpoint.pt"
     if path.is_file():
         ckpt = load_checkpoint(path)
-        same_bn = precise_bn_batches(argparse.Namespace(**ckpt["args"])) == precise_bn_batches(ns)
+        same_bn = precise_bn_batches(options_from(SegTrainConfig, ckpt["args"])) == precise_bn_batches(ns)
         legacy_final = ckpt["step"] >= (ns.max_steps or 0) and precise_bn_batches(ns) == 0  # before the flag existed
         if (ckpt.get("finished") and same_bn) or legacy_final:
             log.info("kept the finished training in %s (%d steps)", ns.out, ckpt["step"])
             return {"step": ckpt["step"], "seconds": 0.0, "out": ns.out}
         why = "interrupted" if ckpt["step"] < (ns.max_steps or 0) else "its precise BN differs"
         log.info("resuming the training in %s at step %d (%s)", ns.out, ckpt["step"], why)
-        ns.resume = str(path)
+        ns = dataclasses.replace(ns, resume=str(path))
     return train_seg(ns)
 
 
-def small_set_repeat(n: int, args: argparse.Namespace) -> int:
+def small_set_repeat(n: int, args: ExperimentOptions) -> int:
     """Repeat a few photos so every loader slot fills two batches (10 photos, batch 8, 2 workers: x4).
     A fixed step budget sees the same photos either way; only the epoch length changes."""
     return max(1, math.ceil(2 * args.batch_size * max(1, args.workers) / max(1, n)))
 
 
-def curve_pretrained(args: argparse.Namespace, out: Path, targets: tuple[str, ...] | None
+def curve_pretrained(args: ExperimentOptions, out: Path, targets: tuple[str, ...] | None
                      ) -> list[tuple[Path, int, float]]:
     """One synthetic-pretrained model per repeat, (checkpoint, its steps, seconds spent here): given by
     ``--pretrained A,B,C`` (one per repeat) or pretrained here with the repeat's seed."""
@@ -555,7 +554,7 @@ def curve_pretrained(args: argparse.Namespace, out: Path, targets: tuple[str, ..
     return found
 
 
-def score_point(ckpt: Path, sets: RealSets, cross: list[EvalSet], args: argparse.Namespace,
+def score_point(ckpt: Path, sets: RealSets, cross: list[EvalSet], args: ExperimentOptions,
                 device: torch.device, store: bool) -> dict[str, Any]:
     """Validation threshold, test scores at it, and F1 on each extra set at the same threshold."""
     res = choose_and_score(ckpt, sets, args, device, store)
@@ -564,7 +563,7 @@ def score_point(ckpt: Path, sets: RealSets, cross: list[EvalSet], args: argparse
     return res
 
 
-def run_curve(args: argparse.Namespace) -> dict[str, Any]:
+def run_curve(args: ExperimentOptions) -> dict[str, Any]:
     """Real-only vs synthetic -> fine-tune on nested subsets of N labelled photos (see trainer.experiments.curve)."""
     if not args.synthetic and not args.pretrained:
         raise TrainerInputError("the curve needs --data shards (or --pretrained checkpoints) for the fine-tune arm")

@@ -6,6 +6,7 @@ every command reads folders and depth the same way.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -15,6 +16,7 @@ from torch.utils.data import DataLoader
 
 from trainer.core.errors import TrainerInputError
 from trainer.seg.augment import SampleConfig
+from trainer.seg.config import DataArgs
 from trainer.seg.depth import (
     DEFAULT_RELIEF,
     DEFAULT_RELIEF_RANGE_MM,
@@ -86,30 +88,13 @@ def resolve_valid_channel(depth: str, valid_channel: bool | None) -> bool:
     return depth in SPARSE_DEPTHS if valid_channel is None else bool(valid_channel)
 
 
-@dataclass(frozen=True)
-class DataOptions:
-    """How real folders and shards are read and turned into network input: the data flags, typed and resolved."""
+@dataclass(kw_only=True)
+class DataOptions(DataArgs):
+    """How real folders and shards are read and turned into network input: the data flags, resolved (the
+    validity channel and the label member decided, the photo-group rule added)."""
 
-    depth: str = "none"
     valid_channel: bool = False
-    image_dir: str = "images"
-    mask_dir: str = "masks"
-    mask_suffix: str = ""
-    ignore_dir: str = "ignore"
-    real_depth_dir: str | None = None
-    real_depth_kind: str = "depth"
-    real_depth_scale: float = 1.0
-    focal_px: float | None = None
-    baseline_m: float | None = None
-    depth_near: float = 0.2
-    depth_far: float = 5.0
-    depth_norm: str = "fixed"
-    relief: str = DEFAULT_RELIEF
-    relief_range_mm: float = DEFAULT_RELIEF_RANGE_MM
-    relief_sigma: float = DEFAULT_RELIEF_SIGMA
     mask_member: str = DEFAULT_MASK_MEMBER
-    size: int | None = None
-    skip_bad: bool = False
     group_pattern: str = DEFAULT_GROUP_PATTERN
 
     @property
@@ -119,19 +104,12 @@ class DataOptions:
         return "rgbdv" if self.valid_channel else "rgbd"
 
     @classmethod
-    def from_args(cls, args: argparse.Namespace) -> DataOptions:
-        """The options a command's parsed flags (``add_data_args``) give; the one place that reads them."""
-        return cls(
-            depth=args.depth, valid_channel=resolve_valid_channel(args.depth, args.valid_channel),
-            image_dir=args.image_dir, mask_dir=args.mask_dir, mask_suffix=args.mask_suffix,
-            ignore_dir=args.ignore_dir, real_depth_dir=args.real_depth_dir,
-            real_depth_kind=args.real_depth_kind, real_depth_scale=args.real_depth_scale, focal_px=args.focal_px,
-            baseline_m=args.baseline_m, depth_near=args.depth_near, depth_far=args.depth_far,
-            depth_norm=args.depth_norm, relief=args.relief, relief_range_mm=args.relief_range_mm,
-            relief_sigma=args.relief_sigma, mask_member=args.mask_member or DEFAULT_MASK_MEMBER,
-            size=args.size, skip_bad=args.skip_bad,
-            group_pattern=getattr(args, "group_pattern", DEFAULT_GROUP_PATTERN),
-        )
+    def from_args(cls, args: DataArgs) -> DataOptions:
+        """The options a command's data flags (``add_data_args``) give; the one place that resolves them."""
+        flags = {f.name: getattr(args, f.name) for f in dataclasses.fields(DataArgs)}
+        return cls(**flags | {"valid_channel": resolve_valid_channel(args.depth, args.valid_channel),
+                              "mask_member": args.mask_member or DEFAULT_MASK_MEMBER,
+                              "group_pattern": getattr(args, "group_pattern", DEFAULT_GROUP_PATTERN)})
 
 
 def grouped_split(opts: DataOptions, root: str | Path, *, val_fraction: float, test_fraction: float,

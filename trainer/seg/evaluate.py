@@ -18,6 +18,7 @@ from trainer.core.checkpoint import load_checkpoint
 from trainer.core.device import pick_device
 from trainer.core.errors import TrainerInputError
 from trainer.seg.builders import DataOptions, add_data_args, eval_loader, real_folder, shard_source
+from trainer.seg.config import EvaluateOptions
 from trainer.seg.metrics import plot_pr_curve
 from trainer.seg.scoring import evaluate, inherit_depth, load_model
 from trainer.seg.stream import SegStream
@@ -39,10 +40,10 @@ def add_eval_args(p: argparse.ArgumentParser) -> None:
     add_data_args(p)
 
 
-def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
+def run_evaluate(args: EvaluateOptions) -> dict[str, Any]:
     device = pick_device(args.device)
     model, cfg, train_args = load_model(args.checkpoint, device)
-    inherit_depth(args, train_args, cfg)
+    args = inherit_depth(args, train_args, cfg)
     if not args.data and not args.real:
         raise TrainerInputError("give evaluation data: --data SHARDS and/or --real FOLDER")
     opts = DataOptions.from_args(args)

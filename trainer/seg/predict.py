@@ -23,6 +23,7 @@ stopping the run) only with ``--skip-bad``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 from dataclasses import dataclass, field
@@ -37,6 +38,7 @@ from trainer.core.checkpoint import load_checkpoint
 from trainer.core.device import pick_device
 from trainer.core.errors import TrainerInputError
 from trainer.seg.builders import DataOptions, add_data_args, real_folder
+from trainer.seg.config import PredictOptions
 from trainer.seg.scoring import inherit_depth, load_model, predict_probability
 from trainer.seg.sources import _SHARD_MEMBER
 from trainer.seg.threshold import operating_threshold
@@ -123,7 +125,7 @@ def _shard_sample(root: Path, s: dict[str, Any], model_depth: str) -> dict[str, 
             "metric_depth": np.asarray(s["depth"], np.float32), "K": K, "path": f"{root}:{key}"}
 
 
-def _measure(mask: np.ndarray, sample: dict[str, Any], K: np.ndarray | None, args: argparse.Namespace):
+def _measure(mask: np.ndarray, sample: dict[str, Any], K: np.ndarray | None, args: PredictOptions):
     """(measurement, unit): metres in the view (K + depth), metres per pixel, or pixels."""
     from fusion.measure.crack_measure import measure_cracks
     from fusion.measure.metric_size import MetricSizeError, measure_in_view
@@ -140,7 +142,7 @@ def _measure(mask: np.ndarray, sample: dict[str, Any], K: np.ndarray | None, arg
     return measure_cracks(mask, args.pixel_size_m, min_length=args.min_length), ("m" if args.pixel_size_m else "px")
 
 
-def run_predict(args: argparse.Namespace) -> PredictResult:
+def run_predict(args: PredictOptions) -> PredictResult:
     from fusion.measure.metric_size import MetricSizeError, load_intrinsics  # pure numpy/scipy
 
     if args.intrinsics and args.pixel_size_m:
@@ -153,7 +155,7 @@ def run_predict(args: argparse.Namespace) -> PredictResult:
             raise TrainerInputError(str(exc)) from None
     device = pick_device(args.device)
     model, cfg, train_args = load_model(args.checkpoint, device)
-    inherit_depth(args, train_args, cfg)
+    args = inherit_depth(args, train_args, cfg)
     threshold, source = operating_threshold(load_checkpoint(args.checkpoint), args.threshold)
     log.info("threshold %.2f: %s", threshold, source)
     root = Path(args.input)
@@ -168,13 +170,10 @@ def run_predict(args: argparse.Namespace) -> PredictResult:
         def image_path(item):
             return f"{root}:{item['__key__']}"
     else:
-        if not (root / args.image_dir).is_dir():  # a flat folder of photos
-            args.image_dir = "."
-        model_depth = args.depth
-        if K is not None and args.real_depth_dir:  # depth for the measurement, even for an RGB model
-            args.depth = "gt"
-        folder = real_folder(DataOptions.from_args(args), root, require_masks=False)
-        args.depth = model_depth
+        read = dataclasses.replace(
+            args, image_dir=args.image_dir if (root / args.image_dir).is_dir() else ".",  # a flat folder of photos
+            depth="gt" if K is not None and args.real_depth_dir else args.depth)  # depth for the measurement too
+        folder = real_folder(DataOptions.from_args(read), root, require_masks=False)
         items, total, load, image_path = folder.keys, len(folder.keys), folder.load, folder.image_path
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -6,9 +6,9 @@ same forward pass and the same dataset-level histogram (``trainer.seg.metrics``)
 """
 from __future__ import annotations
 
-import argparse
+import dataclasses
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, TypeVar
 
 import numpy as np
 import torch
@@ -18,10 +18,13 @@ from tqdm import tqdm
 from trainer.core.checkpoint import load_checkpoint
 from trainer.core.errors import TrainerInputError
 from trainer.seg.augment import SampleConfig, sample_to_tensors
+from trainer.seg.config import DataArgs
 from trainer.seg.metrics import ConfusionHistogram
 from trainer.seg.models import SegModel, build_model
 from trainer.seg.sources import RealFolder
 from trainer.seg.stream import SegStream
+
+D = TypeVar("D", bound=DataArgs)
 
 
 def load_model(path: str | Path, device: torch.device) -> tuple[SegModel, SampleConfig, dict[str, Any]]:
@@ -111,14 +114,14 @@ class CheckpointScorer:
         self._model = None
 
 
-def inherit_depth(args: argparse.Namespace, train_args: dict[str, Any], cfg: SampleConfig) -> None:
-    """Depth source and channel count follow the checkpoint (the model needs them).
+def inherit_depth(opts: D, train_args: dict[str, Any], cfg: SampleConfig) -> D:
+    """``opts`` with the depth source and channel count of the checkpoint (the model needs them).
 
     The normalisation (fixed/minmax/relief and its parameters) is in ``cfg``,
     the checkpoint's sample config, so it is never taken from the command line.
     The label member of shards follows the checkpoint unless ``--mask-member`` is given.
     """
-    args.depth = train_args.get("depth", "none") if cfg.channels != "rgb" else "none"
-    args.valid_channel = cfg.channels == "rgbdv"
-    if getattr(args, "mask_member", None) is None:
-        args.mask_member = train_args.get("mask_member")
+    return dataclasses.replace(
+        opts, depth=train_args.get("depth", "none") if cfg.channels != "rgb" else "none",
+        valid_channel=cfg.channels == "rgbdv",
+        mask_member=opts.mask_member if opts.mask_member is not None else train_args.get("mask_member"))

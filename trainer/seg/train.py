@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import json
 import logging
 import math
@@ -35,6 +36,7 @@ from tqdm import tqdm
 from crackgen.cli_aliases import deprecated_alias, deprecation_note
 from trainer.core.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state, steps_seen
 from trainer.core.errors import TrainerInputError
+from trainer.core.options import options_dict
 from trainer.seg.appearance import SiteAdaptation, parse_band, targets_from_folder
 from trainer.seg.augment import SampleConfig
 from trainer.seg.builders import (
@@ -48,6 +50,7 @@ from trainer.seg.builders import (
     sample_config,
     shard_source,
 )
+from trainer.seg.config import SegTrainConfig
 from trainer.seg.losses import LOSSES, Loss, make_loss
 from trainer.seg.models import ARCHS, build_model
 from trainer.seg.precise_bn import precise_bn
@@ -77,7 +80,7 @@ class _OldTargetFlag(argparse.Action):
         setattr(namespace, self.dest, values)
 
 
-def resolve_site_targets(args: argparse.Namespace) -> None:
+def resolve_site_targets(args: SegTrainConfig) -> None:
     """``--target`` with ``--target-appearance`` / ``--target-bn`` (or their old spellings) -> the folder each
     use reads (``args.adapt_target``, ``args.bn_target``); one line when they do not fit together."""
     uses = [u for u, on in (("--target-appearance", args.target_appearance), ("--target-bn", args.target_bn)) if on]
@@ -205,7 +208,7 @@ class _Logger:
 class Run:
     """The fixed pieces of one training run, built once by ``main`` and handed to each step."""
 
-    args: argparse.Namespace
+    args: SegTrainConfig
     out: Path
     device: torch.device
     amp: bool
@@ -239,7 +242,7 @@ def init_distributed() -> tuple[torch.device, bool]:
     return torch.device("cuda", local) if cuda else torch.device("cpu"), world > 1
 
 
-def load_resume_checkpoint(args: argparse.Namespace) -> dict[str, Any] | None:
+def load_resume_checkpoint(args: SegTrainConfig) -> dict[str, Any] | None:
     """The ``--resume`` checkpoint, refused when an argument that fixes the data order changed."""
     if not args.resume:
         return None
@@ -259,7 +262,7 @@ def load_resume_checkpoint(args: argparse.Namespace) -> dict[str, Any] | None:
     return ckpt
 
 
-def build_datasets(args: argparse.Namespace) -> tuple[SegStream, SegStream | None, RealSplit | None]:
+def build_datasets(args: SegTrainConfig) -> tuple[SegStream, SegStream | None, RealSplit | None]:
     """(training stream, validation stream or None, grouped split of --real or None) from the data flags."""
     opts = DataOptions.from_args(args)
     cfg = sample_config(opts, crop=args.crop, rotate_deg=args.rotate_deg, jitter=args.jitter)
@@ -273,7 +276,7 @@ def build_datasets(args: argparse.Namespace) -> tuple[SegStream, SegStream | Non
             val_syn = shard_source(opts, args.data, frac, "val", args.split_seed)
     real = val_real = split = None
     if args.real:
-        real, val_real, split = real_split(opts, args.real, frac, args.split_seed, getattr(args, "real_stems", None))
+        real, val_real, split = real_split(opts, args.real, frac, args.split_seed, args.real_stems)
     if args.val_data:
         val_syn = shard_source(opts, args.val_data)
     if args.val_real:
@@ -285,10 +288,10 @@ def build_datasets(args: argparse.Namespace) -> tuple[SegStream, SegStream | Non
     return train_ds, eval_stream(eval_cfg, val_syn, val_real, seed=args.seed, skip_bad=args.skip_bad), split
 
 
-def site_adaptation(args: argparse.Namespace) -> SiteAdaptation | None:
+def site_adaptation(args: SegTrainConfig) -> SiteAdaptation | None:
     """From ``--target F --target-appearance`` (a folder), or ``args.adapt_targets`` (paths set by sim2real)."""
-    targets = getattr(args, "adapt_targets", None)
-    if not targets and getattr(args, "adapt_target", None):
+    targets = args.adapt_targets
+    if not targets and args.adapt_target:
         targets = targets_from_folder(args.adapt_target)
     if not targets:
         return None
@@ -296,7 +299,7 @@ def site_adaptation(args: argparse.Namespace) -> SiteAdaptation | None:
     return SiteAdaptation(tuple(targets), methods, parse_band(args.adapt_band), args.adapt_prob)
 
 
-def load_init_weights(path: str, bare: torch.nn.Module, args: argparse.Namespace) -> None:
+def load_init_weights(path: str, bare: torch.nn.Module, args: SegTrainConfig) -> None:
     """Weights only from ``--init`` (pretrain -> fine-tune); arch and input channels must match."""
     ckpt = load_checkpoint(path)
     src = ckpt.get("args", {})
@@ -311,11 +314,11 @@ def load_init_weights(path: str, bare: torch.nn.Module, args: argparse.Namespace
     args.init_steps = steps_seen(ckpt)
 
 
-def precise_bn_batches(args: argparse.Namespace) -> int:
+def precise_bn_batches(args: SegTrainConfig) -> int:
     """Batches for ``--precise-bn``: given, else 50 after ``--init`` (a fine-tune) and 0 otherwise."""
-    if getattr(args, "precise_bn", None) is not None:
+    if args.precise_bn is not None:
         return max(0, int(args.precise_bn))
-    return 50 if getattr(args, "init", None) else 0
+    return 50 if args.init else 0
 
 
 def finish_precise_bn(run: Run, train_ds: SegStream, state: TrainState) -> None:
@@ -333,10 +336,10 @@ def finish_precise_bn(run: Run, train_ds: SegStream, state: TrainState) -> None:
         log.info("precise BN: BatchNorm statistics recomputed with the final weights on %d training batches", used)
 
 
-def bn_target_photos(args: argparse.Namespace) -> tuple[str, ...] | None:
+def bn_target_photos(args: SegTrainConfig) -> tuple[str, ...] | None:
     """Photos for target BN: ``args.bn_targets`` (paths set by sim2real) or ``--target F --target-bn``."""
-    photos = getattr(args, "bn_targets", None)
-    if not photos and getattr(args, "bn_target", None):
+    photos = args.bn_targets
+    if not photos and args.bn_target:
         photos = targets_from_folder(args.bn_target)
     return tuple(photos) if photos else None
 
@@ -357,7 +360,7 @@ def finish_target_bn(run: Run, state: TrainState) -> None:
         log.info("target BN: BatchNorm statistics re-estimated on %d batches of %d unlabeled photos", used, len(photos))
 
 
-def build_network(args: argparse.Namespace, in_channels: int, device: torch.device,
+def build_network(args: SegTrainConfig, in_channels: int, device: torch.device,
                   distributed: bool) -> tuple[torch.nn.Module, torch.nn.Module]:
     """(model to run, bare model to save): seeded init, channels_last on CUDA, SyncBN/DDP under torchrun."""
     torch.manual_seed(args.seed)
@@ -373,14 +376,14 @@ def build_network(args: argparse.Namespace, in_channels: int, device: torch.devi
     return model, bare
 
 
-def step_budget(args: argparse.Namespace, steps_per_epoch: int) -> tuple[int, int]:
+def step_budget(args: SegTrainConfig, steps_per_epoch: int) -> tuple[int, int]:
     """(epochs, total steps): ``--epochs`` of full epochs, or enough epochs to cover ``--max-steps``."""
     if args.max_steps is None:
         return args.epochs, args.epochs * steps_per_epoch
     return math.ceil(args.max_steps / steps_per_epoch), args.max_steps
 
 
-def build_lr_scheduler(args: argparse.Namespace, opt: torch.optim.Optimizer,
+def build_lr_scheduler(args: SegTrainConfig, opt: torch.optim.Optimizer,
                        total: int) -> torch.optim.lr_scheduler.LRScheduler:
     if args.lr_scheduler == "poly":
         return torch.optim.lr_scheduler.PolynomialLR(opt, total_iters=total, power=0.9)
@@ -414,7 +417,7 @@ def checkpoint_payload(run: Run, state: TrainState) -> dict[str, Any]:
     return {
         "model": run.bare.state_dict(), "optimizer": run.optimizer.state_dict(),
         "lr_scheduler": run.lr_scheduler.state_dict(), "scaler": run.scaler.state_dict() if run.amp else None,
-        "epoch": state.epoch, "batch_in_epoch": state.batch_in_epoch, "step": state.step, "args": vars(run.args),
+        "epoch": state.epoch, "batch_in_epoch": state.batch_in_epoch, "step": state.step, "args": options_dict(run.args),
         "sample_config": run.cfg.__dict__, "rng": rng_state(), "best": state.best, "world_size": run.world,
     } | ({THRESHOLD_KEY: state.val_threshold} if state.val_threshold else {})
 
@@ -434,7 +437,7 @@ def validate(run: Run, val_ds: SegStream | None, state: TrainState) -> dict[str,
     return summary
 
 
-def validation_source(args: argparse.Namespace) -> str:
+def validation_source(args: SegTrainConfig) -> str:
     """What the validation stream holds, for the threshold record."""
     parts = [f"--val-real {args.val_real}"] if args.val_real else []
     parts += [f"--val-data {args.val_data}"] if args.val_data else []
@@ -546,8 +549,9 @@ def fit(run: Run, train_ds: SegStream, val_ds: SegStream | None, state: TrainSta
         save_checkpoint(run.out / "checkpoint.pt", checkpoint_payload(run, state) | final)
 
 
-def main(args: argparse.Namespace) -> dict[str, Any]:
+def main(config: SegTrainConfig) -> dict[str, Any]:
     """Run training (or --test-only); returns the final/best validation summary."""
+    args = dataclasses.replace(config)  # resolved below (targets, crop, labels, validity): the caller's stays as given
     device, distributed = init_distributed()
     if args.device:
         device = torch.device(args.device)
@@ -575,7 +579,7 @@ def main(args: argparse.Namespace) -> dict[str, Any]:
     sched = build_lr_scheduler(args, opt, total)
     scaler = torch.amp.GradScaler("cuda", enabled=amp)
     criterion = make_loss(args.loss)
-    if getattr(args, "init", None) and ckpt is None:
+    if args.init and ckpt is None:
         load_init_weights(args.init, bare, args)
     elif ckpt is not None and "init_steps" in ckpt.get("args", {}):  # a resumed fine-tune keeps its provenance
         args.init_steps = ckpt["args"]["init_steps"]

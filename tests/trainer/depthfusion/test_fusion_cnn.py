@@ -7,7 +7,6 @@ ToF that is noisy where its amplitude is low, so confidence is learnable.
 """
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +18,8 @@ from crackgen.shards import ShardWriter, sample_key
 from trainer.cli import build_parser
 from trainer.cli import main as cli_main
 from trainer.core.errors import TrainerInputError
+from trainer.core.options import options_from
+from trainer.depthfusion.config import FusionTrainConfig
 from trainer.depthfusion.data import FusionScene, load_shard_scenes, random_patch
 from trainer.depthfusion.model import ConfidenceCNN
 from trainer.depthfusion.train import make_batch, masked_mse
@@ -73,8 +74,8 @@ def test_missing_members_are_a_one_line_error(tmp_path):
         load_shard_scenes(tmp_path, "tof", progress=False)
 
 
-def _args(parser_args: list[str]) -> argparse.Namespace:
-    return build_parser().parse_args(parser_args)
+def _args(parser_args: list[str]) -> FusionTrainConfig:
+    return options_from(FusionTrainConfig, build_parser().parse_args(parser_args))
 
 
 def test_a_few_training_steps_reduce_the_loss_then_eval_and_fuse(fusion_shards, tmp_path, capsys):
@@ -161,9 +162,9 @@ REAL_CONES = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "r
 
 @pytest.mark.skipif(not REAL_CONES.is_dir(), reason="../shared/data/real is absent")
 def test_real_stereo_scene_has_lidar_inputs_and_gt():
-    from trainer.depthfusion.real_scenes import real_scene
+    from trainer.depthfusion.real_scenes import SimulatedLidar, real_scene
 
-    args = argparse.Namespace(lidar_lines=16, lidar_sigma_px=0.25, lidar_dropout=0.1, seed=0)
+    args = SimulatedLidar(lines=16, sigma_px=0.25, dropout=0.1, seed=0)
     s = real_scene(REAL_CONES, args, "normconv")
     assert s.x.shape == (375, 450, 3) and s.gt.shape == (375, 450)
     assert (s.x[..., 0] > 0).all() and (s.x[..., 1] > 0).all()  # both candidates dense
@@ -177,7 +178,7 @@ def test_skimage_motorcycle_is_a_real_stereo_scene_with_gt():
     """scikit-image's bundled Middlebury 2014 pair loads without files here, and its GT is a disparity: the
     left view matches the right view shifted by it."""
     from fusion.geometry.real_data import load_skimage_motorcycle
-    from trainer.depthfusion.real_scenes import real_scene
+    from trainer.depthfusion.real_scenes import SimulatedLidar, real_scene
 
     s = load_skimage_motorcycle()
     gt, left, right = s["disp_left"], s["left"].astype(np.float32), s["right"].astype(np.float32)
@@ -189,7 +190,7 @@ def test_skimage_motorcycle_is_a_real_stereo_scene_with_gt():
     err_shifted = np.abs(left[ys[ok], xs[ok]] - right[ys[ok], np.clip(xr[ok] + 8, 0, 740)]).mean()
     assert err_gt < 0.5 * err_shifted  # the GT disparity registers the views; 8 px off it does not
 
-    args = argparse.Namespace(lidar_lines=16, lidar_sigma_px=0.25, lidar_dropout=0.1, seed=0)
+    args = SimulatedLidar(lines=16, sigma_px=0.25, dropout=0.1, seed=0)
     scene = real_scene("skimage:motorcycle", args, "normconv")
     assert scene.key == "middlebury2014_motorcycle" and scene.x.shape == (500, 741, 3)
     assert np.median(np.abs(scene.x[..., 1] - scene.gt)[scene.gt > 0]) < 1.0

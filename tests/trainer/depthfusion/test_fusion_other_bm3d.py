@@ -22,6 +22,8 @@ from fusion.depth.postfilter import bm3d_disparity
 from fusion.geometry.stereo import left_right_difference
 from trainer.cli import main as cli_main
 from trainer.core.errors import TrainerInputError
+from trainer.core.options import options_from
+from trainer.depthfusion.config import FusionTrainConfig
 from trainer.depthfusion.data import load_shard_scenes
 from trainer.depthfusion.train import add_fusion_args
 from trainer.depthfusion.train import main as fusion_main
@@ -76,7 +78,8 @@ def test_the_checkpoint_carries_the_filter_and_fusion_eval_rebuilds_the_filtered
         assert not np.allclose(s.x[..., 1], r.x[..., 1], atol=1e-2)  # the filter did something
     p = argparse.ArgumentParser()
     add_fusion_args(p)
-    resume = p.parse_args(["--data", str(shards), "--variant", "lidar", "--resume", str(out / "last.pt"), "--max-steps", "3",
-                           "--crop", "24", "-b", "4", "--val-fraction", "0.34", "--no-progress", "--out", str(out)])
+    resume = options_from(FusionTrainConfig, p.parse_args(
+        ["--data", str(shards), "--variant", "lidar", "--resume", str(out / "last.pt"), "--max-steps", "3",
+         "--crop", "24", "-b", "4", "--val-fraction", "0.34", "--no-progress", "--out", str(out)]))
     with pytest.raises(TrainerInputError, match="other_bm3d"):  # a resume must not change the inputs
         fusion_main(resume)

@@ -1,5 +1,4 @@
 """cracktrain benchmark: the table on hand-made models and folders, thresholds from validation, refusals."""
-import argparse
 import csv
 import json
 import math
@@ -12,6 +11,7 @@ from real_folders import train_tiny_model, write_real_folder
 
 from trainer.cli import main
 from trainer.core.errors import TrainerInputError
+from trainer.experiments.config import BenchmarkOptions
 from trainer.experiments.eval_sets import parse_set
 from trainer.experiments.scoreboard import EvalSet, ModelEntry, markdown_lines, score_all, summarise, write_csv
 from trainer.seg.metrics import ConfusionHistogram
@@ -88,8 +88,7 @@ def test_table_matches_the_hand_computed_one(tmp_path):
 
 
 def _set_args(**kw):
-    return argparse.Namespace(image_dir="images", mask_dir="masks", mask_suffix="", val_fraction=0.2,
-                              test_fraction=0.2, split_seed=0, group_pattern=r"^([^-]+)-", **kw)
+    return BenchmarkOptions(models=[], out="unused", **kw)
 
 
 def test_a_folder_with_mismatched_names_is_refused_in_one_line(tmp_path, capsys):

@@ -59,11 +59,14 @@ def test_csv_round_trip_keeps_every_field(tmp_path):
 def test_curve_continues_only_with_the_same_settings(tmp_path):
     import argparse
 
+    from trainer.core.options import options_from
+    from trainer.experiments.config import ExperimentOptions
     from trainer.experiments.sim2real import add_curve_args, check_curve_settings
 
     p = argparse.ArgumentParser()
     add_curve_args(p)
-    args = p.parse_args(["--data", "s", "--real", "r", "--sizes", "0,10", "--curve-steps", "100"])
+    args = options_from(ExperimentOptions, p.parse_args(["--data", "s", "--real", "r", "--sizes", "0,10",
+                                                          "--curve-steps", "100"]))
     check_curve_settings(args, tmp_path, None)  # first run records them
     check_curve_settings(args, tmp_path, None)  # the same settings continue
     args.curve, args.repeats = "0,10,30", 5  # more sizes and repeats extend the same curve
@@ -79,18 +82,18 @@ def test_curve_continues_only_with_the_same_settings(tmp_path):
 
 
 def test_train_or_reuse_keeps_finished_and_resumes_interrupted(tmp_path, monkeypatch):
-    import argparse
 
     import torch
 
     import trainer.experiments.sim2real as s2r
+    from trainer.seg.config import SegTrainConfig
 
     calls = []
     monkeypatch.setattr(s2r, "train_seg", lambda ns: calls.append(ns.resume) or {"step": ns.max_steps, "seconds": 1.0})
 
     def ns(name, init=None):
         (tmp_path / name).mkdir(exist_ok=True)
-        return argparse.Namespace(out=str(tmp_path / name), max_steps=100, init=init, precise_bn=None, resume=None)
+        return SegTrainConfig(out=str(tmp_path / name), max_steps=100, init=init, precise_bn=None, resume=None)
 
     def ckpt(name, step, init=None, precise_bn=None, **extra):
         torch.save({"model": {}, "args": {"init": init, "precise_bn": precise_bn}, "sample_config": {}, "step": step,

@@ -1,8 +1,8 @@
 """Precise BN after a fine-tune: BN running statistics recomputed with the final weights."""
-import argparse
 
 import torch
 
+from trainer.seg.config import SegTrainConfig
 from trainer.seg.precise_bn import precise_bn
 from trainer.seg.train import precise_bn_batches
 
@@ -42,7 +42,7 @@ def test_no_batchnorm_no_batches_or_zero_is_a_no_op():
 
 
 def test_on_by_default_only_for_a_fine_tune():
-    assert precise_bn_batches(argparse.Namespace(init=None, precise_bn=None)) == 0
-    assert precise_bn_batches(argparse.Namespace(init="pre.pt", precise_bn=None)) == 50
-    assert precise_bn_batches(argparse.Namespace(init="pre.pt", precise_bn=0)) == 0
-    assert precise_bn_batches(argparse.Namespace(init=None, precise_bn=7)) == 7
+    assert precise_bn_batches(SegTrainConfig(init=None, precise_bn=None)) == 0
+    assert precise_bn_batches(SegTrainConfig(init="pre.pt", precise_bn=None)) == 50
+    assert precise_bn_batches(SegTrainConfig(init="pre.pt", precise_bn=0)) == 0
+    assert precise_bn_batches(SegTrainConfig(init=None, precise_bn=7)) == 7

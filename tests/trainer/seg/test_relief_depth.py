@@ -4,7 +4,9 @@ import argparse
 import numpy as np
 import pytest
 
+from trainer.core.options import options_from
 from trainer.seg.builders import DataOptions, add_data_args
+from trainer.seg.config import DataArgs
 from trainer.seg.depth import normalise_depth, relief_mm
 
 H, W, F = 96, 128, 150.0  # image size and focal length (px) of the hand-made camera
@@ -95,10 +97,10 @@ def test_no_valid_depth_gives_zeros():
     assert not d.any() and not v.any()
 
 
-def _parse(*argv: str) -> argparse.Namespace:
+def _parse(*argv: str) -> DataArgs:
     p = argparse.ArgumentParser()
     add_data_args(p)
-    return p.parse_args(list(argv))
+    return options_from(DataArgs, p.parse_args(list(argv)))
 
 
 def test_validity_channel_defaults_on_for_sparse_depth_and_can_be_turned_off():
