@@ -8,6 +8,7 @@ parameters and render settings, so ``bpy.data`` counts and RSS stay flat.
 from __future__ import annotations
 
 import time
+from collections.abc import Hashable
 from dataclasses import dataclass, field
 
 import bpy
@@ -81,6 +82,7 @@ class LiveScene:
         self.right = self._camera("crackgen_right") if stereo else None
         self.renderer = Renderer(self.scene)
         self._has_right = False  # whether the last update posed the right camera
+        self._surface_key: Hashable | None = None  # the surface the scene holds (update(surface_key=...))
         self.scene.camera = self.camera
         apply_settings(self.scene, self.defaults)
 
@@ -101,8 +103,13 @@ class LiveScene:
         d = bpy.data
         return {k: len(getattr(d, k)) for k in ("objects", "meshes", "materials", "images", "lights", "cameras", "worlds", "node_groups")}
 
-    def update(self, spec: SampleSpec, rig: Rig, vertices: np.ndarray, maps: MapsLike, shadow_alpha: np.ndarray | None) -> dict:
+    def update(self, spec: SampleSpec, rig: Rig, vertices: np.ndarray, maps: MapsLike, shadow_alpha: np.ndarray | None,
+               surface_key: Hashable | None = None) -> dict:
         """Write one sample into the scene; returns metadata (light colours, occluder pose).
+
+        ``surface_key``: names the surface (vertices + maps) for reuse; when it equals the last update's key the
+        mesh and textures Blender holds are kept as they are (another view of the same scene), and the
+        persistent-data render keeps their BVH. None always writes them.
 
         ``vertices``: (grid_px^2, 3) from ``crackgen.procedural.surface.surface_vertices``; ``maps``: the
         sample's ``MaterialMaps``; ``shadow_alpha``: (shadow_px, shadow_px) from
@@ -116,7 +123,9 @@ class LiveScene:
         if (out.width, out.height) != (c.width_px, c.height_px):
             raise SceneUpdateError(f"rig.rgb is {out.width}x{out.height} but camera spec is {c.width_px}x{c.height_px}")
         sc.render.resolution_x, sc.render.resolution_y = int(rig.rgb.width), int(rig.rgb.height)
-        self.surface.update(vertices, maps)
+        if surface_key is None or surface_key != self._surface_key:
+            self.surface.update(vertices, maps)
+        self._surface_key = surface_key
         light_meta = self.lights.update(spec.lights, sun_scale=1.0 - spec.sky.overcast if spec.sky.enabled else 1.0)
         self.sky.update(spec.ambient, spec.sky)
         occ = self.occluder.update(spec.shadow, spec.lights, shadow_alpha)

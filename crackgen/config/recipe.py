@@ -350,6 +350,8 @@ class CameraSection(Section):
     principal_jitter_px: _t(-1000, 1000) = _d({"min": -4, "max": 4}, "optical-centre jitter (px)")
     target_jitter_m: _t(-100, 100) = _d({"min": -0.1, "max": 0.1}, "look-at point jitter on the surface (m)")
     distortion: DistortionSection = Field(default_factory=DistortionSection)
+    views_per_scene: int = Field(1, ge=1, le=64, description="samples made from one surface, crack and material build, "
+                                 "each with its own camera pose, lights, shadow and sensors (1 = a new scene per sample)")
 
     @model_validator(mode="after")
     def _lens_does_not_fold(self) -> "CameraSection":
@@ -548,6 +550,10 @@ class LabelSection(Section):
     max_redraws: int = Field(2, ge=0, le=100, description="redraw: new cracks tried before falling back to empty")
 
 
+# (section, key) -> default of options that a recipe's hash leaves out while at that default (see Recipe.hash).
+HASH_NEUTRAL_DEFAULTS: dict[tuple[str, str], Any] = {("camera", "views_per_scene"): 1}
+
+
 class Recipe(Section):
     dataset: DatasetSection = Field(default_factory=DatasetSection)
     crack: CrackSection = Field(default_factory=CrackSection)
@@ -584,8 +590,15 @@ class Recipe(Section):
 
     @property
     def hash(self) -> str:
-        """sha256 of the canonical (defaults filled) recipe, so equivalent files hash alike."""
-        return hashlib.sha256(self.model_dump_json().encode()).hexdigest()
+        """sha256 of the canonical (defaults filled) recipe, so equivalent files hash alike.
+
+        Options added after datasets were made (``HASH_NEUTRAL_DEFAULTS``) are left out while at their default,
+        so those datasets keep their hash: their shards stay byte-identical and ``--resume`` accepts them."""
+        leave_out: dict[str, dict[str, bool]] = {}
+        for (section, key), default in HASH_NEUTRAL_DEFAULTS.items():
+            if getattr(getattr(self, section), key) == default:
+                leave_out.setdefault(section, {})[key] = True
+        return hashlib.sha256(self.model_dump_json(exclude=leave_out or None).encode()).hexdigest()
 
     @property
     def num_shards(self) -> int:

@@ -47,6 +47,10 @@ SECTION_STREAMS: dict[str, int] = {
     "sky": 14,
 }
 
+# Sections drawn once per scene (``[camera] views_per_scene``): every view of a scene shares its crack, surface
+# and material. The other sections are drawn per sample (view), keyed by the sample's own index.
+SCENE_SECTIONS = ("crack", "surface", "material")
+
 
 @dataclass
 class CrackSpec:
@@ -723,27 +727,51 @@ def draw_camera_effects(c: CameraEffectsSection, rng: np.random.Generator) -> Ca
     return spec
 
 
-def _surface(recipe: Recipe, rng: np.random.Generator, camera: CameraSpec) -> SurfaceSpec:
-    """Patch size (``size_m``, or ``size_fov`` times the camera's view width), then the steps (drawn after
-    it, so a recipe without steps keeps its sizes).
+def _surface(recipe: Recipe, rng: np.random.Generator, cameras: list[CameraSpec]) -> SurfaceSpec:
+    """Patch size (``size_m``, or ``size_fov`` times the widest view of the scene's cameras), then the steps
+    (drawn after it, so a recipe without steps keeps its sizes).
 
-    Steps add up (terraces), so their total height is capped at ``step_max_rise`` of the
+    Steps add up (terraces), so their total height is capped at ``step_max_rise`` of the lowest
     camera's height above the patch: four 25 cm steps under a camera 0.6 m up would put the
     surface at the lens (a measured 3400 px disparity), and disparity grows as 1 / (1 - rise)."""
     s = recipe.surface
     if max(s.size_fov.support()) > 0:  # sized to the view (a new option: its own draw order)
-        c = camera
-        view = pixel_footprint_m(c) * max(c.width_px, c.height_px) / max(math.cos(c.tilt_rad), 0.2)
-        size = float(s.size_fov.draw(rng)) * view + 2.0 * max(abs(c.target_x_m), abs(c.target_y_m))
+        view = max(pixel_footprint_m(c) * max(c.width_px, c.height_px) / max(math.cos(c.tilt_rad), 0.2)
+                   for c in cameras)
+        offset = max(max(abs(c.target_x_m), abs(c.target_y_m)) for c in cameras)
+        size = float(s.size_fov.draw(rng)) * view + 2.0 * offset
     else:
         size = float(s.size_m.draw(rng))
     steps = [StepSpec(angle_rad=float(rng.uniform(0.0, math.pi)), offset_m=float(s.step_offset.draw(rng)) * size,
                       height_m=float(s.step_height_m.draw(rng))) for _ in range(int(s.steps.draw(rng)))]
-    cap = s.step_max_rise * camera.distance_m * math.cos(camera.tilt_rad)
+    cap = min(s.step_max_rise * c.distance_m * math.cos(c.tilt_rad) for c in cameras)
     total = sum(st.height_m for st in steps)
     if total > cap:
         steps = [dataclasses.replace(st, height_m=st.height_m * cap / total) for st in steps]
     return SurfaceSpec(size_m=size, grid_px=s.grid_px, crackmap_px=s.crackmap_px, steps=steps)
+
+
+def scene_of(recipe: Recipe, index: int) -> int:
+    """The scene sample ``index`` is a view of: ``index // views_per_scene`` (the sample itself when 1)."""
+    return int(index) // recipe.camera.views_per_scene
+
+
+def scene_cameras(recipe: Recipe, index: int) -> list[CameraSpec]:
+    """The cameras of every view of sample ``index``'s scene, each from its own sample's streams: what the
+    shared surface must cover and what the shared crack map is sized for. Depends on (recipe, index) only."""
+    k = recipe.camera.views_per_scene
+    first = scene_of(recipe, index) * k
+    seed = recipe.dataset.seed
+    return [_camera(recipe, section_rng(seed, v, "camera"), _stereo(recipe, section_rng(seed, v, "stereo")).baseline_m)
+            for v in range(first, first + k)]
+
+
+def crack_pixel_m(recipe: Recipe, spec: SampleSpec) -> float:
+    """Camera pixel (m) the crack map sizes hairlines for: the widest of the scene's views (a hairline is at
+    least ``hairline_px`` wide in every view); with one view per scene, that view's own."""
+    if recipe.camera.views_per_scene == 1:
+        return pixel_footprint_m(spec.camera)
+    return max(pixel_footprint_m(c) for c in scene_cameras(recipe, spec.index))
 
 
 def make_spec(recipe: Recipe, index: int, attempt: int = 0) -> SampleSpec:
@@ -754,20 +782,22 @@ def make_spec(recipe: Recipe, index: int, attempt: int = 0) -> SampleSpec:
         raise TypeError(f"make_spec: recipe must be a Recipe, got {type(recipe).__name__}")
 
     def rng(section: str) -> np.random.Generator:
-        return section_rng(recipe.dataset.seed, index, section, attempt)
+        key = scene_of(recipe, index) if section in SCENE_SECTIONS else index
+        return section_rng(recipe.dataset.seed, key, section, attempt)
 
     li = recipe.lights
     a = rng("ambient")
     lights = _lights(recipe, rng("lights"))
     stereo = _stereo(recipe, rng("stereo"))
     camera = _camera(recipe, rng("camera"), stereo.baseline_m)  # before the surface: the steps stay below it
+    cameras = [camera] if recipe.camera.views_per_scene == 1 else scene_cameras(recipe, index)
     material = _material(recipe, rng("material"))  # before the crack: its shape may depend on the family
     r = recipe.render
     return SampleSpec(
         index=int(index),
         recipe_seed=int(recipe.dataset.seed),
         crack=_crack(recipe, rng("crack"), material.family),
-        surface=_surface(recipe, rng("surface"), camera),
+        surface=_surface(recipe, rng("surface"), cameras),
         material=material,
         lights=lights,
         ambient=AmbientSpec(strength=li.ambient_strength.draw(a), color_temp_k=li.ambient_color_temp_k.draw(a)),

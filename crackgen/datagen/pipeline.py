@@ -30,7 +30,7 @@ import numpy as np
 
 import crackgen
 from crackgen.config.recipe import Recipe
-from crackgen.config.spec import SampleSpec, make_spec, pixel_footprint_m
+from crackgen.config.spec import SampleSpec, crack_pixel_m, make_spec, scene_of
 from crackgen.datagen.heap import configure_heap, release_free_heap
 from crackgen.datagen.lens_stage import canvas_coverage, lens_maps, warp_view_members
 from crackgen.errors import CrackgenError
@@ -88,6 +88,20 @@ class _Timer:
             self.t[name] = self.t.get(name, 0.0) + time.perf_counter() - t0
 
 
+@dataclass
+class SceneBuild:
+    """What every view of one scene shares (``[camera] views_per_scene``): the crack map, the surface mesh, the
+    material maps and the ray caster, built once per (scene, redraw attempt)."""
+
+    key: tuple[int, int]
+    cm: Any  # CrackMap
+    vertices: np.ndarray  # the crack relief alone (what mesh_depth_map measures)
+    world: np.ndarray  # + height steps: what cameras and sensors see
+    maps: Any  # MaterialMaps
+    caster: MeshRaycaster
+    label_depth: np.ndarray | None  # mesh depth at crack-map resolution, for the visible label
+
+
 def crack_pixel_fraction(mask: np.ndarray) -> float:
     return float(np.count_nonzero(mask)) / float(mask.size)
 
@@ -107,6 +121,7 @@ class SampleProducer:
         self.keep_linear = bool(keep_linear)  # keep the scene-linear render on the Sample (crackgen bench --sweep)
         self._scene = None
         self._targets: TargetPhotos | None = None
+        self._build: SceneBuild | None = None  # the last scene, kept for its next view (views_per_scene > 1)
 
     @property
     def targets(self) -> TargetPhotos | None:
@@ -143,6 +158,39 @@ class SampleProducer:
         if self._scene is not None and hasattr(self._scene, "close"):
             self._scene.close()
         self._scene = None
+        self._build = None
+
+    def _scene_build(self, spec: SampleSpec, attempt: int, tm: _Timer) -> SceneBuild:
+        """The shared part of sample ``spec.index``: reused when the previous sample was a view of the same
+        scene, else built (a pure function of the recipe, the scene and the attempt, so reuse changes nothing)."""
+        key = (scene_of(self.recipe, spec.index), int(attempt))
+        if self._build is not None and self._build.key == key:
+            return self._build
+        self._build = None  # the last scene's arrays go before the next one's are made
+        with tm.stage("crackmap"):
+            cm = crack_map(
+                spec.crack,
+                size_px=spec.surface.crackmap_px,
+                size_m=spec.surface.size_m,
+                pixel_m=crack_pixel_m(self.recipe, spec),
+                joints=brick_joints(spec.material) if spec.crack.shape == "stairstep" else None,
+            )
+        with tm.stage("surface"):
+            g = spec.surface.grid_px
+            vertices = surface_vertices(cm, g)  # the crack relief alone: what mesh_depth_map measures
+            world = with_steps(vertices, spec.surface.steps)  # + height steps: what cameras and sensors see
+        with tm.stage("materials"):
+            # the normal map carries only the crack depth the mesh cannot hold: the slope counts once
+            maps = material_maps(spec.material, cm, mesh_depth_map(vertices, g, spec.material.texture_px))
+        with tm.stage("raycast"):
+            caster = MeshRaycaster(world, np.asarray(surface_faces(g)), np.asarray(surface_uvs(g)))
+        with tm.stage("groundtruth"):
+            # the visible label follows the groove the mesh renders, not only the crack map's mask
+            label_depth = mesh_depth_map(vertices, g, cm.size_px) if self.recipe.label.policy == "visible" else None
+        build = SceneBuild(key, cm, vertices, world, maps, caster, label_depth)
+        if self.recipe.camera.views_per_scene > 1:
+            self._build = build
+        return build
 
     # ---- one sample
     def make(self, index: int) -> Sample:
@@ -164,21 +212,8 @@ class SampleProducer:
         with tm.stage("spec"):
             spec: SampleSpec = make_spec(self.recipe, index, attempt)
             rig = make_rig(spec)
-        with tm.stage("crackmap"):
-            cm = crack_map(
-                spec.crack,
-                size_px=spec.surface.crackmap_px,
-                size_m=spec.surface.size_m,
-                pixel_m=pixel_footprint_m(spec.camera),
-                joints=brick_joints(spec.material) if spec.crack.shape == "stairstep" else None,
-            )
-        with tm.stage("surface"):
-            g = spec.surface.grid_px
-            vertices = surface_vertices(cm, g)  # the crack relief alone: what mesh_depth_map measures
-            world = with_steps(vertices, spec.surface.steps)  # + height steps: what cameras and sensors see
-        with tm.stage("materials"):
-            # the normal map carries only the crack depth the mesh cannot hold: the slope counts once
-            maps = material_maps(spec.material, cm, mesh_depth_map(vertices, g, spec.material.texture_px))
+        build = self._scene_build(spec, attempt, tm)
+        cm, maps, caster = build.cm, build.maps, build.caster
         with tm.stage("shadow"):
             alpha = shadow_alpha(spec.shadow, SHADOW_PX) if spec.shadow.enabled else None
         scene = self.scene
@@ -188,16 +223,14 @@ class SampleProducer:
             run_spec = spec
             if self.threads > 0:
                 run_spec = dataclasses.replace(spec, render=dataclasses.replace(spec.render, threads=self.threads))
-            scene_meta = scene.update(run_spec, rig, world, maps, alpha)
+            # the same scene's next view: the mesh and textures Blender holds are this build's already
+            same = build.key if self.recipe.camera.views_per_scene > 1 else None
+            scene_meta = scene.update(run_spec, rig, build.world, maps, alpha, surface_key=same)
         with tm.stage("render"):
             out = scene.render(linear=self.keep_linear)
-        with tm.stage("raycast"):
-            caster = MeshRaycaster(world, np.asarray(surface_faces(g)), np.asarray(surface_uvs(g)))
         with tm.stage("groundtruth"):
             gt = view_ground_truth(rig.rgb, caster, cm.mask)
-            # the visible label follows the groove the mesh renders, not only the crack map's mask
-            mesh_depth = mesh_depth_map(vertices, g, cm.size_px) if self.recipe.label.policy == "visible" else None
-            label = view_label(self.recipe.label, cm, gt, out.rgb, attempt, mesh_depth)
+            label = view_label(self.recipe.label, cm, gt, out.rgb, attempt, build.label_depth)
         if label.redraw:
             return None
         lens_map = None
@@ -252,6 +285,7 @@ class SampleProducer:
             "adapt": adapt_meta,
             "camera_effects": camera_effects_meta,
             "render": {"device": scene_meta.get("device"), "lights": scene_meta.get("lights")},
+            **_views_meta(self.recipe, index),
             "recipe_hash": self.recipe.hash,
             "versions": {"crackgen": crackgen.__version__, "spec": spec.version, **_blender_version()},
         }
@@ -326,6 +360,14 @@ def _scene_meta(spec: SampleSpec, cm, maps, mask: np.ndarray) -> dict[str, Any]:
                     "sun_elevation_deg": float(np.degrees(spec.sky.sun_elevation_rad))}} if spec.sky.enabled else {}),
         "shadow": {"enabled": spec.shadow.enabled, "pattern": spec.shadow.pattern},
     }
+
+
+def _views_meta(recipe: Recipe, index: int) -> dict[str, Any]:
+    """Which scene a sample is a view of (only with ``views_per_scene`` > 1: one view per scene adds nothing)."""
+    k = recipe.camera.views_per_scene
+    if k == 1:
+        return {}
+    return {"scene": {"index": scene_of(recipe, index), "view": int(index) % k, "views_per_scene": k}}
 
 
 def _seeds_meta(spec: SampleSpec, index: int) -> dict[str, Any]:

@@ -35,7 +35,11 @@ ROWS = (
 
 
 def bench(recipe: Recipe, samples: int = 5, threads: int = 0, progress: bool = True) -> dict[str, Any]:
-    """Median per-stage seconds over ``samples`` samples after one warm-up sample."""
+    """Median and mean per-stage seconds over ``samples`` samples after one warm-up sample.
+
+    With ``[camera] views_per_scene`` = K the timed samples start at the second scene (index K: the warm-up
+    built the first) and the mean is the per-sample cost (one view in K builds the scene; the median hides it);
+    give a multiple of K samples."""
     import psutil
     from tqdm import tqdm
 
@@ -53,8 +57,9 @@ def bench(recipe: Recipe, samples: int = 5, threads: int = 0, progress: bool = T
     per: list[dict[str, float]] = []
     sizes: list[int] = []
     rss_trace: list[float] = []  # after each sample: a slow leak shows as a trend, not only as end - start
+    first = recipe.camera.views_per_scene  # the first sample of the second scene (1 with one view per scene)
     with tempfile.TemporaryDirectory(prefix="crackgen_bench_") as tmp, ShardWriter(tmp, 0) as writer:
-        for i in tqdm(range(1, samples + 1), desc="bench", unit="sample", disable=not progress):
+        for i in tqdm(range(first, first + samples), desc="bench", unit="sample", disable=not progress):
             t_start = time.perf_counter()
             s = producer.make(i)
             t = dict(s.timings)
@@ -75,6 +80,7 @@ def bench(recipe: Recipe, samples: int = 5, threads: int = 0, progress: bool = T
     stages = {}
     for label, keys in ROWS:
         stages[label] = statistics.median(sum(t.get(k, 0.0) for k in keys) for t in per)
+    means = {label: statistics.fmean(sum(t.get(k, 0.0) for k in keys) for t in per) for label, keys in ROWS}
     total = statistics.median(t["total"] for t in per)
     render = stages["render"]
     r = recipe
@@ -82,12 +88,14 @@ def bench(recipe: Recipe, samples: int = 5, threads: int = 0, progress: bool = T
         "recipe": {"name": r.dataset.name, "hash": r.hash[:16], "image": f"{r.camera.width_px}x{r.camera.height_px}",
                    "spp": r.render.samples, "grid_px": r.surface.grid_px, "texture_px": r.material.texture_px,
                    "crackmap_px": r.surface.crackmap_px, "tof": r.tof.enabled, "lidar": r.lidar.enabled,
-                   "stereo": r.stereo.enabled},
+                   "stereo": r.stereo.enabled, "views_per_scene": r.camera.views_per_scene},
         "samples": samples,
         "threads": threads,
         "warmup_s": warmup_s,
         "median_s": stages,
         "median_total_s": total,
+        "mean_s": means,
+        "mean_total_s": statistics.fmean(t["total"] for t in per),
         "render_fraction": render / total if total > 0 else None,
         "overhead_ratio": (total - render) / render if render > 0 else None,
         "median_sample_bytes": statistics.median(sizes) if sizes else 0,
@@ -118,13 +126,18 @@ def format_table(res: dict[str, Any]) -> str:
         f"crackgen bench: {r['name']} ({r['image']} px, {r['spp']} spp, grid {r['grid_px']}, texture {r['texture_px']}, "
         f"crack map {r['crackmap_px']}; tof={r['tof']} lidar={r['lidar']} stereo={r['stereo']})",
         f"{res['samples']} timed samples after a {res['warmup_s']:.1f} s warm-up, {res['threads']} Cycles threads",
-        f"{'stage':<16}{'median s':>10}{'share':>8}",
-        "-" * 34,
+        f"{'stage':<16}{'median s':>10}{'share':>8}{'mean s':>10}",
+        "-" * 44,
     ]
+    means = res.get("mean_s", {})
     for label, v in res["median_s"].items():
-        lines.append(f"{label:<16}{v:>10.4f}{(v / total * 100 if total else 0):>7.1f}%")
-    lines.append("-" * 34)
-    lines.append(f"{'total':<16}{total:>10.4f}")
+        mean = f"{means[label]:>10.4f}" if label in means else ""
+        lines.append(f"{label:<16}{v:>10.4f}{(v / total * 100 if total else 0):>7.1f}%{mean}")
+    lines.append("-" * 44)
+    lines.append(f"{'total':<16}{total:>10.4f}{'':>8}" + (f"{res['mean_total_s']:>10.4f}" if "mean_total_s" in res else ""))
+    if r.get("views_per_scene", 1) > 1:
+        lines.append(f"{r['views_per_scene']} views per scene: the mean is the cost per sample (one view in "
+                     f"{r['views_per_scene']} builds the scene)")
     if res["overhead_ratio"] is not None:
         lines.append(f"render share {res['render_fraction'] * 100:.1f}%, overhead ratio (non-render / render) "
                      f"{res['overhead_ratio']:.3f}")
