@@ -249,6 +249,8 @@ class DistractorSection(Section):
     sealant: float = Field(0.15, ge=0, le=1, description="probability of a sealant strip")
     stain: float = Field(0.3, ge=0, le=1, description="probability of stains")
     marking: float = Field(0.15, ge=0, le=1, description="probability of a painted road marking")
+    formwork: float = Field(0.0, ge=0, le=1, description="probability of formwork panel joints and tie holes (concrete only)")
+    rust_streak: float = Field(0.0, ge=0, le=1, description="probability of rust streaks running down from a few sources (not on asphalt)")
 
 
 class ClutterSection(Section):
@@ -550,8 +552,16 @@ class LabelSection(Section):
     max_redraws: int = Field(2, ge=0, le=100, description="redraw: new cracks tried before falling back to empty")
 
 
+def _any_leaf(node: Any) -> bool:
+    return node is True or (isinstance(node, dict) and any(_any_leaf(v) for v in node.values()))
+
+
 # (section, key) -> default of options that a recipe's hash leaves out while at that default (see Recipe.hash).
-HASH_NEUTRAL_DEFAULTS: dict[tuple[str, str], Any] = {("camera", "views_per_scene"): 1}
+HASH_NEUTRAL_DEFAULTS: dict[tuple[str, str], Any] = {
+    ("camera", "views_per_scene"): 1,
+    ("material.distractors", "formwork"): 0.0,
+    ("material.distractors", "rust_streak"): 0.0,
+}
 
 
 class Recipe(Section):
@@ -594,10 +604,14 @@ class Recipe(Section):
 
         Options added after datasets were made (``HASH_NEUTRAL_DEFAULTS``) are left out while at their default,
         so those datasets keep their hash: their shards stay byte-identical and ``--resume`` accepts them."""
-        leave_out: dict[str, dict[str, bool]] = {}
+        leave_out: dict[str, Any] = {}
         for (section, key), default in HASH_NEUTRAL_DEFAULTS.items():
-            if getattr(getattr(self, section), key) == default:
-                leave_out.setdefault(section, {})[key] = True
+            obj, node = self, leave_out
+            for part in section.split("."):
+                obj, node = getattr(obj, part), node.setdefault(part, {})
+            if getattr(obj, key) == default:
+                node[key] = True
+        leave_out = {k: v for k, v in leave_out.items() if _any_leaf(v)}
         return hashlib.sha256(self.model_dump_json(exclude=leave_out or None).encode()).hexdigest()
 
     @property

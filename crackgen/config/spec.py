@@ -47,6 +47,12 @@ SECTION_STREAMS: dict[str, int] = {
     "sky": 14,
 }
 
+# Distractors that belong to some surfaces only (drawn for every family, painted on these).
+SURFACE_DISTRACTORS: dict[str, tuple[str, ...]] = {
+    "formwork": ("concrete",),
+    "rust_streak": ("concrete", "masonry", "blockwork", "steel"),
+}
+
 # Sections drawn once per scene (``[camera] views_per_scene``): every view of a scene shares its crack, surface
 # and material. The other sections are drawn per sample (view), keyed by the sample's own index.
 SCENE_SECTIONS = ("crack", "surface", "material")
@@ -521,6 +527,11 @@ def _material_appearance(m: Any, rng: np.random.Generator, spec: MaterialSpec) -
         seed, a = _seed(rng), float(amount.draw(rng))
         if present:
             spec.clutter.append(ClutterSpec(kind=kind, seed=seed, amount=a))
+    for kind, families in SURFACE_DISTRACTORS.items():  # after every older draw: their coins move nothing else
+        present = rng.random() < getattr(m.distractors, kind)
+        seed = _seed(rng)
+        if present and spec.family in families:
+            spec.distractors.append(DistractorSpec(kind=kind, seed=seed))
 
 
 def _lights(recipe: Recipe, rng: np.random.Generator) -> list[LightSpec]:

@@ -116,11 +116,70 @@ def marking(rng: np.random.Generator, grid: TexGrid, albedo, roughness, height) 
     return mask
 
 
+def formwork(rng: np.random.Generator, grid: TexGrid, albedo, roughness, height) -> np.ndarray:
+    """Cast-in-place concrete's formwork pattern: a grid of straight panel joints (a thin dark grout-loss line
+    or a light fin) every 0.6-2.4 m, with rows of dark tie holes. Straight, regular and line-like: the
+    false positive a bridge inspector's model must not take for a crack."""
+    angle = float(rng.normal(0.0, 0.01))
+    du, dv = rng.uniform(0.6, 2.4), rng.uniform(0.3, 1.2)
+    if rng.random() < 0.5:
+        du, dv = dv, du
+    across, along = grid.line_coords(angle, (0.0, 0.0))  # across ~ v (rows), along ~ u (columns)
+    half = rng.uniform(0.002, 0.006)
+    ph_u, ph_v = rng.uniform(0.0, du), rng.uniform(0.0, dv)
+    # distance to the nearest joint of each family, wrapped into [-spacing/2, spacing/2)
+    to_col = np.mod(along - ph_u + du / 2, du) - du / 2
+    to_row = np.mod(across - ph_v + dv / 2, dv) - dv / 2
+    w_line = np.maximum(_band(grid, to_col, max(half, 0.6 * grid.texel_m)),
+                        _band(grid, to_row, max(half, 0.6 * grid.texel_m)))
+    fin = rng.random() < 0.35  # a light, slightly raised fin instead of a dark grout-loss line
+    tone = np.float32(rng.uniform(1.2, 1.4) if fin else rng.uniform(0.35, 0.7))
+    w_line = w_line * np.float32(rng.uniform(0.7, 1.0))
+    w_hole = np.zeros_like(w_line)
+    if rng.random() < 0.6:  # tie holes at 1/4 and 3/4 of the panel's width and height
+        r = rng.uniform(0.008, 0.015)
+        hu = np.mod(along - ph_u, du / 2) - du / 4
+        hv = np.mod(across - ph_v, dv / 2) - dv / 4
+        w_hole = _band(grid, np.sqrt(hu * hu + hv * hv), r)
+    (w_line, line), (w_hole, hole) = _cut(w_line), _cut(w_hole)
+    w, mask = np.maximum(w_line, w_hole), line | hole
+    albedo *= (1.0 + w_line * (tone - 1.0))[..., None]
+    albedo *= (1.0 - np.float32(rng.uniform(0.5, 0.8)) * w_hole)[..., None]
+    roughness += w * (np.float32(rng.uniform(0.75, 0.95)) - roughness)
+    height += np.float32(rng.uniform(0.0005, 0.002) if fin else -rng.uniform(0.0005, 0.002)) * w_line
+    height -= np.float32(rng.uniform(0.005, 0.02)) * w_hole
+    return mask
+
+
+def rust_streak(rng: np.random.Generator, grid: TexGrid, albedo, roughness, height) -> np.ndarray:
+    """Rust run-off below a few sources (ties, bolts, exposed bars): orange-brown streaks that fade down the
+    surface, narrow at the source and fraying into drips; long, thin and darker than the surface."""
+    down = math.pi / 2 + float(rng.normal(0.0, 0.05))  # the surface's "down" is +v
+    drips = grid.field(_seed(rng), rng.uniform(0.01, 0.03), 3, 0.5, 2.0, (0.15, 2.0))
+    total = np.zeros((grid.px, grid.px), np.float32)
+    for _ in range(int(rng.integers(1, 5))):
+        src = tuple(rng.uniform(0.05, 0.9, 2) * grid.size_m)
+        across, along = grid.line_coords(down, src)
+        length = rng.uniform(0.1, 0.8)
+        w0 = rng.uniform(0.008, 0.03)
+        t = np.clip(along / length, 0.0, None)
+        half = w0 * (1.0 + rng.uniform(0.3, 1.5) * np.minimum(t, 1.0))
+        fade = np.exp(-1.2 * t) * smoothstep(1.0, 0.6, t) * smoothstep(-0.01, 0.0, along)  # ends at its length
+        total = np.maximum(total, _band(grid, across, half) * fade * np.clip(0.7 + 0.3 * drips, 0.0, 1.0))
+    w, mask = _cut(total * np.float32(rng.uniform(0.6, 0.95)))
+    rust = np.asarray([0.45, 0.19, 0.06], np.float32) * np.float32(rng.uniform(0.6, 1.1))
+    albedo += w[..., None] * (rust - albedo)
+    roughness += w * (np.float32(rng.uniform(0.7, 0.9)) - roughness)
+    return mask
+
+
 DISTRACTORS: dict[str, Callable[..., np.ndarray]] = {
     "joint": joint,
     "sealant": sealant,
     "stain": stain,
     "marking": marking,
+    "formwork": formwork,
+    "rust_streak": rust_streak,
 }
 
 

@@ -187,3 +187,22 @@ def test_size_fov_makes_the_patch_cover_the_view_at_every_distance():
     assert make_spec(parse_recipe(""), 0).surface == make_spec(parse_recipe("[surface]\nsize_fov = 0\n"), 0).surface
     with pytest.raises(RecipeError, match="surface.size_fov: 0 \\(off\\) or every value >= 0.5"):
         parse_recipe("[surface]\nsize_fov = { choices = [0, 1.5] }\n")
+
+
+def test_formwork_and_rust_streaks_only_on_their_surfaces_and_they_move_no_other_draw():
+    base = "[material]\nfamily = {choices = [\"asphalt\", \"concrete\", \"masonry\", \"steel\"]}\n"
+    off = parse_recipe(base)
+    on = parse_recipe(base + "[material.distractors]\nformwork = 1.0\nrust_streak = 1.0\n")
+    assert on.hash != off.hash and off.hash == parse_recipe(base + "[material.distractors]\nformwork = 0.0\n").hash
+    seen = set()
+    for i in range(40):
+        a, b = make_spec(off, i), make_spec(on, i)
+        kinds = {d.kind for d in b.material.distractors} - {d.kind for d in a.material.distractors}
+        fam = b.material.family
+        assert ("formwork" in kinds) == (fam == "concrete") and ("rust_streak" in kinds) == (fam != "asphalt")
+        extra = [d for d in b.material.distractors if d.kind in ("formwork", "rust_streak")]
+        assert dataclasses.replace(b.material, distractors=[d for d in b.material.distractors if d not in extra]) \
+            == a.material
+        assert drawn(a) | {"material": None} == drawn(b) | {"material": None}
+        seen.add(fam)
+    assert seen == {"asphalt", "concrete", "masonry", "steel"}

@@ -9,6 +9,7 @@ import pytest
 from crackgen.config.recipe import Recipe
 from crackgen.config.spec import DistractorSpec, MaterialSpec, make_spec
 from crackgen.procedural.crackmap import crack_map
+from crackgen.procedural.distractors import DISTRACTORS
 from crackgen.procedural.materials import (
     Family,
     MaterialError,
@@ -24,7 +25,7 @@ from crackgen.procedural.materials import (
 from crackgen.procedural.texgrid import TexGrid
 
 FAMILIES = ["asphalt", "concrete", "masonry", "steel"]
-KINDS = ["joint", "sealant", "stain", "marking"]
+KINDS = ["joint", "sealant", "stain", "marking", "formwork", "rust_streak"]
 
 
 @pytest.fixture(scope="module")
@@ -331,3 +332,29 @@ def test_dirt_fills_part_of_the_crack_and_spall_chips_its_edges():
     np.testing.assert_array_equal(sp.crack_mask, base.crack_mask)  # unlabelled
     np.testing.assert_array_equal(
         material_maps(mspec("concrete", px=64, crack_spall=True, crack_seed=2), g).height_m, sp.height_m)
+
+
+def test_formwork_is_a_regular_grid_of_lines_and_rust_runs_down_in_orange(cm):
+    from crackgen.procedural.texgrid import TexGrid
+
+    size = 3.0  # metres: several formwork panels in view
+    grid = TexGrid(256, size)
+    for seed in range(4):
+        albedo = np.full((256, 256, 3), 0.5, np.float32)
+        rough, height = np.full((256, 256), 0.6, np.float32), np.zeros((256, 256), np.float32)
+        m = DISTRACTORS["formwork"](np.random.default_rng(seed), grid, albedo, rough, height)
+        assert 0.002 < m.mean() < 0.2  # thin lines (and tie holes), not an area
+        # straight joints across the whole patch (a joint drifts at most a few texels over 3 m): some band of
+        # 6 rows holds a line over every column, and some band of 6 columns one over every row
+        across_rows = max(m[j:j + 6].any(axis=0).mean() for j in range(0, 250))
+        across_cols = max(m[:, j:j + 6].any(axis=1).mean() for j in range(0, 250))
+        assert across_rows > 0.97 and across_cols > 0.97
+        assert np.abs(albedo[m] - 0.5).min() > 1e-3 and np.allclose(albedo[~m], 0.5)
+    albedo = np.full((256, 256, 3), 0.5, np.float32)
+    rough, height = np.full((256, 256), 0.6, np.float32), np.zeros((256, 256), np.float32)
+    m = DISTRACTORS["rust_streak"](np.random.default_rng(3), TexGrid(256, 1.0), albedo, rough, height)
+    assert m.any() and np.allclose(albedo[~m], 0.5) and (height == 0).all()
+    r, b = albedo[m][:, 0], albedo[m][:, 2]
+    assert (r > b).all() and np.percentile(r - b, 90) > 0.1  # orange-brown, strongest near its sources
+    ys, xs = np.nonzero(m)
+    assert np.ptp(ys) > np.ptp(xs) / 4  # runs down the surface (+v), not across it
