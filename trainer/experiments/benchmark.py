@@ -84,7 +84,10 @@ def expand_model(spec: str) -> list[tuple[str, Path]]:
         return [(label or p.parent.name, p)]
     if (p / "sim2real.json").is_file():
         rows = json.loads((p / "sim2real.json").read_text()).get("runs", {})
-        found = [(name, Path(r["checkpoint"])) for name, r in rows.items() if "checkpoint" in r]
+        # each row's checkpoint is ROW/checkpoint.pt inside this folder; the path recorded at training time
+        # names where the folder was then (a moved or copied folder must not score the original's models)
+        found = [(name, p / name / "checkpoint.pt" if (p / name / "checkpoint.pt").is_file() else Path(r["checkpoint"]))
+                 for name, r in rows.items() if "checkpoint" in r]
         if not found:
             raise TrainerInputError(f"{p}/sim2real.json has no finished rows with a checkpoint (made before "
                                     "validation thresholds? re-run sim2real)")

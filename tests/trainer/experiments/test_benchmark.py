@@ -180,3 +180,23 @@ def test_seg_val_fraction_on_real_data_keeps_groups_whole(tmp_path):
     split = read_split(run)
     assert len(split.val) == 3 and len({s.split("-")[0] for s in split.val}) == 1  # one whole photo
     assert not {s.split("-")[0] for s in split.val} & {s.split("-")[0] for s in split.train}
+
+
+def test_a_moved_sim2real_folder_names_its_own_checkpoints(tmp_path):
+    """sim2real.json records where each row's checkpoint was written; a renamed copy must score its own."""
+    import shutil
+
+    from trainer.experiments.benchmark import expand_model
+
+    first = tmp_path / "run_a"
+    for row in ("synthetic", "real"):
+        (first / row).mkdir(parents=True)
+        (first / row / "checkpoint.pt").write_bytes(row.encode())
+    runs = {row: {"checkpoint": str(first / row / "checkpoint.pt"), "test": {}} for row in ("synthetic", "real")}
+    (first / "sim2real.json").write_text(json.dumps({"runs": runs}))
+    moved = tmp_path / "run_b"
+    shutil.move(first, moved)
+    shutil.copytree(moved, first)  # the original is back too: the moved copy must not point at it
+    found = dict(expand_model(f"v1={moved}"))
+    assert found == {"v1 synthetic": moved / "synthetic" / "checkpoint.pt", "v1 real": moved / "real" / "checkpoint.pt"}
+    assert expand_model(str(first))[0][1] == first / "synthetic" / "checkpoint.pt"
