@@ -552,10 +552,6 @@ class LabelSection(Section):
     max_redraws: int = Field(2, ge=0, le=100, description="redraw: new cracks tried before falling back to empty")
 
 
-def _any_leaf(node: Any) -> bool:
-    return node is True or (isinstance(node, dict) and any(_any_leaf(v) for v in node.values()))
-
-
 # (section, key) -> default of options that a recipe's hash leaves out while at that default (see Recipe.hash).
 HASH_NEUTRAL_DEFAULTS: dict[tuple[str, str], Any] = {
     ("camera", "views_per_scene"): 1,
@@ -606,12 +602,15 @@ class Recipe(Section):
         so those datasets keep their hash: their shards stay byte-identical and ``--resume`` accepts them."""
         leave_out: dict[str, Any] = {}
         for (section, key), default in HASH_NEUTRAL_DEFAULTS.items():
-            obj, node = self, leave_out
-            for part in section.split("."):
-                obj, node = getattr(obj, part), node.setdefault(part, {})
+            parts = section.split(".")
+            obj = self
+            for part in parts:
+                obj = getattr(obj, part)
             if getattr(obj, key) == default:
+                node = leave_out
+                for part in parts:
+                    node = node.setdefault(part, {})
                 node[key] = True
-        leave_out = {k: v for k, v in leave_out.items() if _any_leaf(v)}
         return hashlib.sha256(self.model_dump_json(exclude=leave_out or None).encode()).hexdigest()
 
     @property

@@ -780,8 +780,6 @@ def scene_cameras(recipe: Recipe, index: int) -> list[CameraSpec]:
 def crack_pixel_m(recipe: Recipe, spec: SampleSpec) -> float:
     """Camera pixel (m) the crack map sizes hairlines for: the widest of the scene's views (a hairline is at
     least ``hairline_px`` wide in every view); with one view per scene, that view's own."""
-    if recipe.camera.views_per_scene == 1:
-        return pixel_footprint_m(spec.camera)
     return max(pixel_footprint_m(c) for c in scene_cameras(recipe, spec.index))
 
 
@@ -801,7 +799,7 @@ def make_spec(recipe: Recipe, index: int, attempt: int = 0) -> SampleSpec:
     lights = _lights(recipe, rng("lights"))
     stereo = _stereo(recipe, rng("stereo"))
     camera = _camera(recipe, rng("camera"), stereo.baseline_m)  # before the surface: the steps stay below it
-    cameras = [camera] if recipe.camera.views_per_scene == 1 else scene_cameras(recipe, index)
+    cameras = scene_cameras(recipe, index)  # [camera] with one view per scene
     material = _material(recipe, rng("material"))  # before the crack: its shape may depend on the family
     r = recipe.render
     return SampleSpec(

@@ -7,11 +7,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from trainer.seg.config import DataArgs
+from trainer.seg.config import DataArgs, SplitArgs
 
 
 @dataclass(kw_only=True)
-class ExperimentOptions(DataArgs):
+class ExperimentOptions(DataArgs, SplitArgs):
     """``cracktrain sim2real`` and ``cracktrain curve``: the same trainings, scored under one protocol."""
 
     real: str
@@ -37,10 +37,6 @@ class ExperimentOptions(DataArgs):
     out: str = "runs/sim2real"
     device: str | None = None
     no_progress: bool = False
-    val_fraction: float = 0.2
-    test_fraction: float = 0.2
-    split_seed: int = 0
-    group_pattern: str = "^([^-]+)-"
     # sim2real's rows
     runs: str | None = None
     finetune_fraction: float = 0.5
@@ -56,7 +52,7 @@ class ExperimentOptions(DataArgs):
 
 
 @dataclass(kw_only=True)
-class BenchmarkOptions:
+class BenchmarkOptions(SplitArgs):
     """``cracktrain benchmark``: models x real sets under the evaluation protocol."""
 
     models: list[str]
@@ -72,10 +68,6 @@ class BenchmarkOptions:
     image_dir: str = "images"
     mask_dir: str = "masks"
     mask_suffix: str = ""
-    val_fraction: float = 0.2
-    test_fraction: float = 0.2
-    split_seed: int = 0
-    group_pattern: str = "^([^-]+)-"
 
 
 @dataclass(kw_only=True)

@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from trainer.seg.depth import DEFAULT_RELIEF, DEFAULT_RELIEF_RANGE_MM, DEFAULT_RELIEF_SIGMA
+from trainer.seg.real_split import DEFAULT_GROUP_PATTERN
 
 
 @dataclass(kw_only=True)
@@ -37,6 +38,16 @@ class DataArgs:
 
 
 @dataclass(kw_only=True)
+class SplitArgs:
+    """The grouped train / validation / test split of a real folder (``add_split_args`` with 0.2 / 0.2)."""
+
+    val_fraction: float = 0.2
+    test_fraction: float = 0.2
+    split_seed: int = 0
+    group_pattern: str = DEFAULT_GROUP_PATTERN
+
+
+@dataclass(kw_only=True)
 class SegTrainConfig(DataArgs):
     """One segmentation training (``cracktrain seg``); experiments build it with other settings."""
 
@@ -48,7 +59,7 @@ class SegTrainConfig(DataArgs):
     val_real: str | None = None
     val_fraction: float = 0.0
     split_seed: int = 0
-    group_pattern: str = "^([^-]+)-"
+    group_pattern: str = DEFAULT_GROUP_PATTERN
     arch: str = "deeplabv3_resnet50"
     loss: str = "bce"
     lr: float = 0.0001
