@@ -284,6 +284,9 @@ class MaterialSection(Section):
     photo_size_m: _t(0.01, 100) = _d({"min": 0.3, "max": 1.0}, "surface side covered by one photo side (m)")
     photo_clean: _c("none", "blackhat", "wide") = _d("blackhat", "photo: suppress dark lines (possible cracks) before use: blackhat (thin lines) or wide (also wide open cracks)")
     clutter: ClutterSection = Field(default_factory=ClutterSection)
+    joint_relief_m: _t(0, 0.05) = _d(
+        0.0, "masonry/blockwork: mortar recess below the brick faces as mesh relief (m), so raking light casts the "
+        "course-edge shadows of a real wall; 0 = the family's recess in the normal map only")
 
     @model_validator(mode="after")
     def _photo_needs_folder(self) -> "MaterialSection":
@@ -557,6 +560,7 @@ HASH_NEUTRAL_DEFAULTS: dict[tuple[str, str], Any] = {
     ("camera", "views_per_scene"): 1,
     ("material.distractors", "formwork"): 0.0,
     ("material.distractors", "rust_streak"): 0.0,
+    ("material", "joint_relief_m"): Dist(value=0.0),
 }
 
 

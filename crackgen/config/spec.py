@@ -53,6 +53,9 @@ SURFACE_DISTRACTORS: dict[str, tuple[str, ...]] = {
     "rust_streak": ("concrete", "masonry", "blockwork", "steel"),
 }
 
+# Families whose mortar joints ``[material] joint_relief_m`` recesses into the mesh (their family file has bricks).
+JOINT_RELIEF_FAMILIES = ("masonry", "blockwork")
+
 # Sections drawn once per scene (``[camera] views_per_scene``): every view of a scene shares its crack, surface
 # and material. The other sections are drawn per sample (view), keyed by the sample's own index.
 SCENE_SECTIONS = ("crack", "surface", "material")
@@ -142,6 +145,7 @@ class MaterialSpec:
     photo_size_m: float = 0.0  # surface side covered by one photo side (m)
     photo_clean: str = "none"  # none | blackhat
     clutter: list[ClutterSpec] = field(default_factory=list)
+    joint_relief_m: float = 0.0  # brick/block families: mortar recess carried by the mesh (m); 0 = normal map only
 
 
 @dataclass
@@ -376,6 +380,8 @@ class SampleSpec:
         for name in ("lens", "sky"):  # off: the sample's JSON is what it was before the option existed
             if not getattr(self, name).enabled:
                 del d[name]
+        if not self.material.joint_relief_m:  # likewise for joints in the normal map only
+            del d["material"]["joint_relief_m"]
         return d
 
     def to_json(self) -> str:
@@ -532,6 +538,9 @@ def _material_appearance(m: Any, rng: np.random.Generator, spec: MaterialSpec) -
         seed = _seed(rng)
         if present and spec.family in families:
             spec.distractors.append(DistractorSpec(kind=kind, seed=seed))
+    relief = float(m.joint_relief_m.draw(rng))  # always drawn, last: it moves no other draw
+    if spec.family in JOINT_RELIEF_FAMILIES:
+        spec.joint_relief_m = relief
 
 
 def _lights(recipe: Recipe, rng: np.random.Generator) -> list[LightSpec]:

@@ -39,8 +39,15 @@ from crackgen.postrender.targets import TargetPhotos
 from crackgen.procedural.crackmap import crack_map
 from crackgen.procedural.materials import brick_joints, material_maps
 from crackgen.procedural.shadow_pattern import shadow_alpha
-from crackgen.procedural.surface import mesh_depth_map, surface_faces, surface_uvs, surface_vertices, with_steps
-from crackgen.sim.groundtruth import view_ground_truth, view_label
+from crackgen.procedural.surface import (
+    mesh_depth_map,
+    surface_faces,
+    surface_uvs,
+    surface_vertices,
+    with_relief,
+    with_steps,
+)
+from crackgen.sim.groundtruth import label_texels, view_ground_truth, view_label
 from crackgen.sim.raycast import MeshRaycaster
 from crackgen.sim.rig import make_rig
 from crackgen.sim.sensors import sensor_rng
@@ -96,10 +103,10 @@ class SceneBuild:
     key: tuple[int, int]
     cm: Any  # CrackMap
     vertices: np.ndarray  # the crack relief alone (what mesh_depth_map measures)
-    world: np.ndarray  # + height steps: what cameras and sensors see
+    world: np.ndarray  # + height steps and joint relief: what cameras and sensors see
     maps: Any  # MaterialMaps
     caster: MeshRaycaster
-    label_depth: np.ndarray | None  # mesh depth at crack-map resolution, for the visible label
+    label_texels: np.ndarray  # crack-map texels labelled crack (``label_texels``): every view looks its pixels up
 
 
 def crack_pixel_fraction(mask: np.ndarray) -> float:
@@ -178,16 +185,19 @@ class SampleProducer:
         with tm.stage("surface"):
             g = spec.surface.grid_px
             vertices = surface_vertices(cm, g)  # the crack relief alone: what mesh_depth_map measures
-            world = with_steps(vertices, spec.surface.steps)  # + height steps: what cameras and sensors see
         with tm.stage("materials"):
             # the normal map carries only the crack depth the mesh cannot hold: the slope counts once
             maps = material_maps(spec.material, cm, mesh_depth_map(vertices, g, spec.material.texture_px))
+        with tm.stage("surface"):
+            # + height steps and recessed joints: what cameras and sensors see
+            world = with_relief(with_steps(vertices, spec.surface.steps), maps.relief_m)
         with tm.stage("raycast"):
             caster = MeshRaycaster(world, np.asarray(surface_faces(g)), np.asarray(surface_uvs(g)))
         with tm.stage("groundtruth"):
             # the visible label follows the groove the mesh renders, not only the crack map's mask
             label_depth = mesh_depth_map(vertices, g, cm.size_px) if self.recipe.label.policy == "visible" else None
-        build = SceneBuild(key, cm, vertices, world, maps, caster, label_depth)
+            texels = label_texels(self.recipe.label, cm, label_depth)
+        build = SceneBuild(key, cm, vertices, world, maps, caster, texels)
         if self.recipe.camera.views_per_scene > 1:
             self._build = build
         return build
@@ -233,7 +243,7 @@ class SampleProducer:
             out = scene.render(linear=self.keep_linear)
         with tm.stage("groundtruth"):
             gt = view_ground_truth(rig.rgb, caster, cm.mask)
-            label = view_label(self.recipe.label, cm, gt, out.rgb, attempt, build.label_depth)
+            label = view_label(self.recipe.label, cm, gt, out.rgb, attempt, texels=build.label_texels)
         if label.redraw:
             return None
         lens_map = None

@@ -9,7 +9,8 @@ coat. Adding or tuning a family needs no code. All randomness comes from
 Maps share the crack map's index convention: ``array[j, i]``, i along u = world +x,
 j along v = world +y, row 0 at v = 0 (as Blender stores images), over the same
 ``size_m`` square. Mortar joints, saw-cut joints, sealant, stains and markings change
-the texture only; the GT crack mask comes from the crack map alone.
+the texture only (brick and block joints go into the mesh instead when ``joint_relief_m`` > 0:
+``MaterialMaps.relief_m``); the GT crack mask comes from the crack map alone.
 """
 from __future__ import annotations
 
@@ -238,6 +239,7 @@ class MaterialMaps:
     distractor_mask: np.ndarray  # (T,T) bool where distractors were painted (GT mask stays empty there)
     crack_mask: np.ndarray  # (T,T) bool crack map mask resampled (nearest) to T
     clutter_mask: np.ndarray | None = None  # (T,T) bool where clutter was painted (never labelled)
+    relief_m: np.ndarray | None = None  # (T,T) float32 joint relief (m, <= 0 in the mortar) for the mesh, or None
     photo: str = ""  # family "photo": the photo's file name
 
     @property
@@ -313,8 +315,14 @@ def material_maps(spec: MaterialSpec, cm: CrackMapLike, mesh_depth_m: np.ndarray
     photo = ""
     if spec.family == "photo":
         photo = _photo(spec, fam, grid, albedo, roughness, height)
+    relief = None
     if fam.bricks is not None:
-        _bricks(fam.bricks, grid, rng, albedo, roughness, height)
+        if spec.joint_relief_m > 0:  # the recess goes into the mesh (``surface.with_relief``), not the normal map
+            relief = np.zeros((px, px), np.float32)
+            _bricks(fam.bricks, grid, rng, albedo, roughness, relief, depth_m=spec.joint_relief_m)
+            relief -= np.float32(spec.joint_relief_m)  # brick faces at z = 0, mortar joints below
+        else:
+            _bricks(fam.bricks, grid, rng, albedo, roughness, height)
     for sp in fam.speckles:
         _speckles(sp, grid, rng, albedo, roughness, height)
     if fam.paint is not None:
@@ -356,6 +364,7 @@ def material_maps(spec: MaterialSpec, cm: CrackMapLike, mesh_depth_m: np.ndarray
         crack_mask=crack_mask,
         clutter_mask=clutter_mask,
         photo=photo,
+        relief_m=relief,
     )
 
 
@@ -580,7 +589,9 @@ def brick_joints(spec: MaterialSpec) -> JointGrid | None:
                      ox=ox, oy=oy)
 
 
-def _bricks(b: Bricks, grid: TexGrid, rng: np.random.Generator, albedo, roughness, height) -> None:
+def _bricks(b: Bricks, grid: TexGrid, rng: np.random.Generator, albedo, roughness, height,
+            depth_m: float | None = None) -> None:
+    """Paint the bond; brick faces rise ``depth_m`` (default: the family's ``mortar_depth_m``) above the mortar."""
     pitch_x, pitch_y, ox, oy = _brick_origin(b, rng)
     if b.edge_noise_m > 0:
         f = grid.field(_seed(rng), 0.03, 2) * np.float32(b.edge_noise_m)
@@ -597,8 +608,8 @@ def _bricks(b: Bricks, grid: TexGrid, rng: np.random.Generator, albedo, roughnes
     _paint_bricks(
         grid.x_m, ox, oy, pitch_x, pitch_y, b.mortar_m, b.bond_offset, max(b.bevel_m, grid.texel_m * 0.5),
         jx, jy, np.clip(colors, 0, 1).astype(np.float32), rough.astype(np.float32),
-        np.asarray(b.mortar_color, np.float32), float(b.mortar_roughness), float(b.mortar_depth_m),
-        albedo, roughness, height,
+        np.asarray(b.mortar_color, np.float32), float(b.mortar_roughness),
+        float(b.mortar_depth_m if depth_m is None else depth_m), albedo, roughness, height,
     )
 
 

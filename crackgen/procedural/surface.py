@@ -21,10 +21,12 @@ sample, which is what the Blender worker ``foreach_set``s.
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+from numba import njit, prange
 from scipy import ndimage
 
 from crackgen.errors import CrackgenError
@@ -36,6 +38,7 @@ __all__ = [
     "surface_faces",
     "surface_vertices",
     "with_steps",
+    "with_relief",
     "mesh_depth_at_uv",
     "mesh_depth_map",
     "centreline_depth_kept",
@@ -134,22 +137,53 @@ def with_steps(vertices: np.ndarray, steps) -> np.ndarray:
     return out
 
 
+def with_relief(vertices: np.ndarray, relief_m: np.ndarray | None) -> np.ndarray:
+    """``vertices`` with a texture-space relief map (``MaterialMaps.relief_m``, m, +z up) added at each vertex's UV:
+    recessed mortar joints, whose edges then cast real shadows. The map is sampled bilinearly at texel centres
+    (``[j, i]``, row j along v), like every map of the patch. Without a map ``vertices`` itself is returned."""
+    if relief_m is None:
+        return vertices
+    g = _check_grid(int(round(np.sqrt(len(vertices)))))
+    relief = np.asarray(relief_m, dtype=np.float32)
+    if g * g != len(vertices) or relief.ndim != 2 or relief.shape[0] != relief.shape[1]:
+        raise SurfaceError(f"with_relief: needs a square vertex grid and a square map, got {len(vertices)} "
+                           f"vertices and a {relief.shape} map")
+    t = np.arange(g, dtype=np.float64) / (g - 1) * relief.shape[0] - 0.5  # vertex UV in texel coordinates
+    jj, ii = np.meshgrid(t, t, indexing="ij")
+    dz = ndimage.map_coordinates(relief, [jj.ravel(), ii.ravel()], order=1, mode="nearest")
+    out = np.array(vertices, dtype=np.float32, copy=True)
+    out[:, 2] += dz.astype(np.float32)
+    return out
+
+
 def mesh_depth_at_uv(vertices: np.ndarray, grid_px: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Depth (m, >= 0 into the surface) of the rendered triangles at UVs: exact, on ``surface_faces``' split.
 
     Cell (i, j) holds triangles (v00, v10, v11) where a >= b and (v00, v11, v01) where b > a, with
-    (a, b) the position inside the cell along u and v."""
+    (a, b) the position inside the cell along u and v. (A compiled loop: a scene samples 3.4 M texels.)"""
     g = _check_grid(grid_px)
-    z = -np.asarray(vertices, dtype=np.float64)[:, 2].reshape(g, g)  # [j, i]
-    x = np.clip(np.asarray(u, dtype=np.float64) * (g - 1), 0, g - 1)
-    y = np.clip(np.asarray(v, dtype=np.float64) * (g - 1), 0, g - 1)
-    i = np.minimum(np.floor(x).astype(np.intp), g - 2)
-    j = np.minimum(np.floor(y).astype(np.intp), g - 2)
-    a, b = x - i, y - j
-    z00, z10, z01, z11 = z[j, i], z[j, i + 1], z[j + 1, i], z[j + 1, i + 1]
-    lower = z00 + a * (z10 - z00) + b * (z11 - z10)
-    upper = z00 + b * (z01 - z00) + a * (z11 - z01)
-    return np.where(a >= b, lower, upper).astype(np.float32)
+    z = np.ascontiguousarray(-np.asarray(vertices, dtype=np.float64)[:, 2].reshape(g, g))  # [j, i]
+    u64, v64 = np.broadcast_arrays(np.asarray(u, dtype=np.float64), np.asarray(v, dtype=np.float64))
+    out = _mesh_depth_kernel(z, np.ascontiguousarray(u64).ravel(), np.ascontiguousarray(v64).ravel())
+    return out.reshape(u64.shape)
+
+
+@njit(cache=True, parallel=True)
+def _mesh_depth_kernel(z, u, v):  # pragma: no cover  (numba; same float64 operations, in the same order, as numpy)
+    g = z.shape[0]
+    out = np.empty(u.size, np.float32)
+    for k in prange(u.size):
+        x = min(max(u[k] * (g - 1), 0.0), g - 1.0)
+        y = min(max(v[k] * (g - 1), 0.0), g - 1.0)
+        i = min(int(math.floor(x)), g - 2)
+        j = min(int(math.floor(y)), g - 2)
+        a, b = x - i, y - j
+        z00, z10, z01, z11 = z[j, i], z[j, i + 1], z[j + 1, i], z[j + 1, i + 1]
+        if a >= b:
+            out[k] = z00 + a * (z10 - z00) + b * (z11 - z10)
+        else:
+            out[k] = z00 + b * (z01 - z00) + a * (z11 - z01)
+    return out
 
 
 def mesh_depth_map(vertices: np.ndarray, grid_px: int, px: int) -> np.ndarray:

@@ -87,14 +87,17 @@ def label_texels(cfg: LabelSection, cm: CrackMap, mesh_depth_m: np.ndarray | Non
 
 
 def view_label(cfg: LabelSection, cm: CrackMap, gt: ViewGroundTruth, rgb: np.ndarray, attempt: int = 0,
-               mesh_depth_m: np.ndarray | None = None) -> ViewLabel:
+               mesh_depth_m: np.ndarray | None = None, texels: np.ndarray | None = None) -> ViewLabel:
     """Label of the view ``gt`` was cast for, checked on the clean render ``rgb``
-    (``mesh_depth_m``: see ``label_texels``)."""
+    (``mesh_depth_m``: see ``label_texels``). ``texels``: ``label_texels(cfg, cm, mesh_depth_m)`` when the caller
+    already has it: it is a property of the scene, so the views of one scene share it."""
     thesis = gt.mask
     if cfg.policy == "thesis":
         label = thesis.copy()
     else:
-        label = (mask_lookup(label_texels(cfg, cm, mesh_depth_m), gt.uv) * 255).astype(np.uint8)
+        if texels is None:
+            texels = label_texels(cfg, cm, mesh_depth_m)
+        label = (mask_lookup(texels, gt.uv) * 255).astype(np.uint8)
         label = drop_small_components(label, cfg.min_component_px)
     px = int(np.count_nonzero(label))
     contrast = label_contrast(rgb, label)

@@ -189,20 +189,36 @@ def test_size_fov_makes_the_patch_cover_the_view_at_every_distance():
         parse_recipe("[surface]\nsize_fov = { choices = [0, 1.5] }\n")
 
 
-def test_formwork_and_rust_streaks_only_on_their_surfaces_and_they_move_no_other_draw():
-    base = "[material]\nfamily = {choices = [\"asphalt\", \"concrete\", \"masonry\", \"steel\"]}\n"
-    off = parse_recipe(base)
-    on = parse_recipe(base + "[material.distractors]\nformwork = 1.0\nrust_streak = 1.0\n")
-    assert on.hash != off.hash and off.hash == parse_recipe(base + "[material.distractors]\nformwork = 0.0\n").hash
+def _without_formwork_and_rust(a, b):
+    """b's material less the formwork and rust streaks it gained over a, which only their surfaces get."""
+    kinds = {d.kind for d in b.material.distractors} - {d.kind for d in a.material.distractors}
+    fam = b.material.family
+    assert ("formwork" in kinds) == (fam == "concrete") and ("rust_streak" in kinds) == (fam != "asphalt")
+    extra = [d for d in b.material.distractors if d.kind in ("formwork", "rust_streak")]
+    return dataclasses.replace(b.material, distractors=[d for d in b.material.distractors if d not in extra])
+
+
+def _without_joint_relief(a, b):
+    """b's material less its joint relief, which only brick and block walls get (and off leaves out of the JSON)."""
+    assert (0.003 <= b.material.joint_relief_m <= 0.01) == (b.material.family in ("masonry", "blockwork"))
+    assert a.material.joint_relief_m == 0.0 and "joint_relief_m" not in a.to_dict()["material"]
+    assert type(b).from_json(b.to_json()) == b
+    return dataclasses.replace(b.material, joint_relief_m=0.0)
+
+
+@pytest.mark.parametrize("on_text, zero_text, strip", [
+    ("[material.distractors]\nformwork = 1.0\nrust_streak = 1.0\n", "[material.distractors]\nformwork = 0.0\n",
+     _without_formwork_and_rust),
+    ("joint_relief_m = { min = 0.003, max = 0.01 }\n", "joint_relief_m = 0\n", _without_joint_relief),
+])
+def test_surface_specific_options_only_on_their_surfaces_and_they_move_no_other_draw(on_text, zero_text, strip):
+    base = "[material]\nfamily = {choices = [\"asphalt\", \"concrete\", \"masonry\", \"blockwork\", \"steel\"]}\n"
+    off, on = parse_recipe(base), parse_recipe(base + on_text)
+    assert on.hash != off.hash and off.hash == parse_recipe(base + zero_text).hash  # off at 0: old hashes hold
     seen = set()
     for i in range(40):
         a, b = make_spec(off, i), make_spec(on, i)
-        kinds = {d.kind for d in b.material.distractors} - {d.kind for d in a.material.distractors}
-        fam = b.material.family
-        assert ("formwork" in kinds) == (fam == "concrete") and ("rust_streak" in kinds) == (fam != "asphalt")
-        extra = [d for d in b.material.distractors if d.kind in ("formwork", "rust_streak")]
-        assert dataclasses.replace(b.material, distractors=[d for d in b.material.distractors if d not in extra]) \
-            == a.material
+        assert strip(a, b) == a.material
         assert drawn(a) | {"material": None} == drawn(b) | {"material": None}
-        seen.add(fam)
-    assert seen == {"asphalt", "concrete", "masonry", "steel"}
+        seen.add(b.material.family)
+    assert seen == {"asphalt", "concrete", "masonry", "blockwork", "steel"}

@@ -5,6 +5,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from crackgen.config.recipe import Recipe
 from crackgen.config.spec import DistractorSpec, MaterialSpec, make_spec
@@ -358,3 +359,41 @@ def test_formwork_is_a_regular_grid_of_lines_and_rust_runs_down_in_orange(cm):
     assert (r > b).all() and np.percentile(r - b, 90) > 0.1  # orange-brown, strongest near its sources
     ys, xs = np.nonzero(m)
     assert np.ptp(ys) > np.ptp(xs) / 4  # runs down the surface (+v), not across it
+
+
+@pytest.mark.parametrize("family, depth", [("masonry", 0.006), ("blockwork", 0.008)])
+def test_joint_relief_moves_the_mortar_recess_from_the_normal_map_into_the_mesh(cm, family, depth):
+    from crackgen.procedural.surface import mesh_depth_at_uv, surface_vertices, with_relief
+
+    flat = dataclasses.replace(empty_like(cm), size_m=0.6)  # 2.3 mm texels: a 10 mm joint is 4 texels wide
+    off = material_maps(mspec(family, px=256), flat)
+    on = material_maps(mspec(family, px=256, joint_relief_m=depth), flat)
+    assert off.relief_m is None and on.relief_m is not None
+    np.testing.assert_array_equal(on.albedo, off.albedo)  # the same wall: same joints, same draws
+    relief = on.relief_m
+    assert relief.max() == 0.0 and relief.min() == pytest.approx(-depth, abs=1e-6)
+    mortar = relief < -0.9 * depth
+    family_depth = load_family(family).bricks.mortar_depth_m
+    # the normal map's height lost exactly the family's joint term: brick faces family_depth above the mortar
+    np.testing.assert_allclose(off.height_m - on.height_m, family_depth * (1.0 + relief / depth), atol=1e-6)
+    assert 0.03 < mortar.mean() < 0.3  # joints, not faces
+    g = 513
+    verts = with_relief(surface_vertices(flat, g), relief)
+    assert with_relief(verts, None) is verts
+    # the mesh holds the recess: its depth at the centres of mortar texels far from a face is the relief depth
+    core = ndimage.binary_erosion(mortar)
+    j, i = np.nonzero(core)
+    u, v = (i + 0.5) / 256, (j + 0.5) / 256
+    md = mesh_depth_at_uv(verts, g, u, v)
+    assert core.any() and np.median(md) == pytest.approx(depth, rel=0.05)
+    jb, ib = np.nonzero(relief == 0.0)
+    assert np.median(mesh_depth_at_uv(verts, g, (ib + 0.5) / 256, (jb + 0.5) / 256)) < 0.05 * depth
+    with pytest.raises(Exception, match="with_relief"):
+        with_relief(verts[:-1], relief)
+
+
+def test_joint_relief_ignores_families_without_joints(cm):
+    flat = empty_like(cm)
+    np.testing.assert_array_equal(material_maps(mspec("concrete", joint_relief_m=0.006), flat).height_m,
+                                  material_maps(mspec("concrete"), flat).height_m)
+    assert material_maps(mspec("concrete", joint_relief_m=0.006), flat).relief_m is None

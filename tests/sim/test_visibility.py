@@ -93,6 +93,13 @@ def test_view_label_visible_is_inside_thesis_and_narrower(stub_contrast):
     np.testing.assert_array_equal(lab.thesis, gt.mask)
     th = view_label(LabelSection(policy="thesis"), cm, gt, rgb)
     np.testing.assert_array_equal(th.mask, gt.mask)
+    # the scene's texels, computed once and handed to each view, give the same label (what the pipeline does)
+    shared = view_label(LabelSection(), cm, gt, rgb, texels=groundtruth.label_texels(LabelSection(), cm))
+    np.testing.assert_array_equal(shared.mask, lab.mask)
+    assert shared.meta == lab.meta
+    # and a view labels from the texels it is given, not from the crack map
+    none = view_label(LabelSection(), cm, gt, rgb, texels=np.zeros_like(cm.mask))
+    assert not (none.mask > 0).any()
 
 
 @pytest.mark.parametrize("invisible", ["empty", "keep", "redraw"])
