@@ -37,7 +37,15 @@ from trainer.experiments.eval_sets import (
     parse_set,
     trained_images,
 )
-from trainer.experiments.scoreboard import EvalSet, ModelEntry, markdown_lines, plot_bars, score_all, write_csv
+from trainer.experiments.scoreboard import (
+    EvalSet,
+    ModelEntry,
+    markdown_lines,
+    plot_bars,
+    plot_cost,
+    score_all,
+    write_csv,
+)
 from trainer.seg.builders import add_split_args
 from trainer.seg.scoring import CheckpointScorer
 from trainer.seg.threshold import choose_threshold, stored_threshold
@@ -63,6 +71,10 @@ def add_benchmark_args(p: argparse.ArgumentParser) -> None:
                    help="also describe what the first model of each row gets wrong on each set: its N images with the "
                         "most false-positive pixels as overlays (OUT/errors/ROW/SET/), and its false positives as line- "
                         "or blob-like, darker or brighter than their surround (0: off)")
+    p.add_argument("--cost", action="append", default=None, metavar="LABEL=BENCH.json",
+                   help="what one sample of LABEL's training data cost to make: a `crackgen bench --json` file "
+                        "(core-seconds per sample = its mean s/sample x its Cycles threads); adds a cost column and "
+                        "cost.png, F1 against core-seconds per sample (repeatable)")
     p.add_argument("--workers", "-j", type=int, default=2)
     p.add_argument("--device", default=None)
     p.add_argument("--no-progress", action="store_true")
@@ -146,6 +158,40 @@ def _slug(text: str) -> str:
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)
 
 
+def core_seconds_per_sample(path: str | Path) -> float:
+    """Core-seconds one sample cost in a ``crackgen bench --json`` run: mean wall s/sample x the worker's threads."""
+    try:
+        bench = json.loads(Path(path).read_text())
+        seconds, threads = float(bench["mean_total_s"]), int(bench["threads"])
+    except FileNotFoundError:
+        raise TrainerInputError(f"--cost: {path}: no such file") from None
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise TrainerInputError(f"--cost: {path}: not a `crackgen bench --json` file "
+                                f"(needs mean_total_s and threads: {type(exc).__name__})") from None
+    if not (seconds > 0 and threads > 0):
+        raise TrainerInputError(f"--cost: {path}: mean_total_s and threads must be > 0, got {seconds} and {threads}")
+    return seconds * threads
+
+
+def parse_costs(specs: list[str] | None, labels: list[str]) -> dict[str, float]:
+    """``LABEL=BENCH.json`` options -> label -> core-seconds per sample; every label must name a model row."""
+    costs: dict[str, float] = {}
+    for spec in specs or []:
+        label, sep, path = spec.partition("=")
+        if not sep or not label or not path:
+            raise TrainerInputError(f"--cost {spec!r}: expected LABEL=BENCH.json")
+        if label not in labels:
+            raise TrainerInputError(f"--cost {spec!r}: no model row is labelled {label!r} (rows: {', '.join(labels)})")
+        if label in costs:
+            raise TrainerInputError(f"--cost: {label!r} given twice")
+        costs[label] = core_seconds_per_sample(path)
+    return costs
+
+
+def _model_labels(specs: list[str]) -> list[str]:
+    return list(dict.fromkeys(label for spec in specs for label, _ in expand_model(spec)))
+
+
 def run_benchmark(args: BenchmarkOptions) -> dict[str, Any]:
     out = Path(args.out)
     device = pick_device(args.device)
@@ -153,6 +199,7 @@ def run_benchmark(args: BenchmarkOptions) -> dict[str, Any]:
     sets = [parse_set(s, args, args.real_root) for s in specs]
     if len({s.name for s in sets}) != len(sets):
         raise TrainerInputError(f"--set names must differ, got {[s.name for s in sets]}")
+    costs = parse_costs(args.cost, _model_labels(args.models)) if args.cost else {}
     entries = build_entries(args, device, sets)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -169,11 +216,13 @@ def run_benchmark(args: BenchmarkOptions) -> dict[str, Any]:
     errors = error_table(entries, sets, out, args.errors) if args.errors > 0 else []
     title = args.title or f"benchmark of {len(entries)} models on {len(sets)} sets"
     write_csv(rows, out / "benchmark.csv")
-    md = [f"# {title}", "", *markdown_lines(rows, sets), *errors]
+    md = [f"# {title}", "", *markdown_lines(rows, sets, costs), *errors]
     (out / "benchmark.md").write_text("\n".join(md) + "\n")
     plot_bars(rows, sets, out / "benchmark.png", title)
+    if costs:
+        plot_cost(rows, sets, costs, out / "cost.png", title)
     result = {"models": len(entries), "labels": len({e.label for e in entries}), "sets": [s.name for s in sets],
               "seconds": round(time.perf_counter() - t0, 1), "out": str(out),
-              "rows": [r.__dict__ for r in rows]}
+              "core_seconds_per_sample": costs, "rows": [r.__dict__ for r in rows]}
     (out / "benchmark.json").write_text(json.dumps(result, indent=1))
     return result

@@ -62,6 +62,7 @@ class BenchmarkOptions(SplitArgs):
     real_root: str = "../shared/data/real"
     title: str | None = None
     errors: int = 0
+    cost: list[str] | None = None
     workers: int = 2
     device: str | None = None
     no_progress: bool = False

@@ -13,7 +13,7 @@ import csv
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable, Iterable, Protocol, Sequence
+from typing import Callable, Iterable, Mapping, Protocol, Sequence
 
 import numpy as np
 
@@ -115,17 +115,21 @@ def summarise(rows: Sequence[ScoreRow]) -> dict[str, dict[str, dict[str, tuple[f
     return out
 
 
-def markdown_lines(rows: Sequence[ScoreRow], sets: Sequence[EvalSet]) -> list[str]:
-    """Headline table (F1 at the validation threshold, one column per set) and the full table."""
+def markdown_lines(rows: Sequence[ScoreRow], sets: Sequence[EvalSet],
+                   costs: Mapping[str, float] | None = None) -> list[str]:
+    """Headline table (F1 at the validation threshold, one column per set; with ``costs``, label -> core-seconds
+    per training sample, a cost column) and the full table."""
     summ = summarise(rows)
     names = [s.name for s in sets]
     n_models = {label: sum(r.label == label and r.set == next(iter(by_set)) for r in rows)
                 for label, by_set in summ.items()}
+    cost_head, cost_rule = ("core-s / sample | ", "---|") if costs else ("", "")
     lines = ["F1 at each model's validation threshold (mean ± sample sd over the models of a row):", "",
-             "| model | n | " + " | ".join(names) + " |", "|---|---|" + "---|" * len(names)]
+             f"| model | n | {cost_head}" + " | ".join(names) + " |", f"|---|---|{cost_rule}" + "---|" * len(names)]
     for label, by_set in summ.items():
         cells = [fmt(*by_set[n][HEADLINE][:2]) if n in by_set else "–" for n in names]
-        lines.append(f"| {label} | {n_models[label]} | " + " | ".join(cells) + " |")
+        cost = (f"{costs[label]:.2f} | " if label in costs else "– | ") if costs else ""
+        lines.append(f"| {label} | {n_models[label]} | {cost}" + " | ".join(cells) + " |")
     lines += ["", "All figures (P, R, F1 and IoU at the validation threshold; F1 at 0.5; oracle F1 at the set's "
               "own best threshold, which looks at the labels being scored):", "",
               "| model | set | precision | recall | **F1** | IoU | F1 @ 0.5 | oracle F1 |", "|---|---|---|---|---|---|---|---|"]
@@ -174,6 +178,40 @@ def plot_bars(rows: Sequence[ScoreRow], sets: Sequence[EvalSet], path: Path, tit
     ax.set_ylim(0, 1)
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
+    ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def plot_cost(rows: Sequence[ScoreRow], sets: Sequence[EvalSet], costs: Mapping[str, float], path: Path,
+              title: str) -> None:
+    """F1 (mean ± sd over a row's models) against the core-seconds one training sample of the row cost: one line
+    per set through the rows that have a cost, each point named by its row."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    summ = summarise(rows)
+    labels = sorted((label for label in summ if label in costs), key=lambda label: costs[label])
+    fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
+    for s in sets:
+        pts = [(costs[label], *summ[label][s.name][HEADLINE][:2]) for label in labels if s.name in summ[label]]
+        if not pts:
+            continue
+        x, mean, sd = (np.asarray(v, dtype=np.float64) for v in zip(*pts))
+        ax.errorbar(x, mean, yerr=np.nan_to_num(sd), marker="o", capsize=3, label=s.name)
+    top = max((summ[label][n][HEADLINE][0] for label in labels for n in summ[label]), default=1.0)
+    for label in labels:
+        ax.annotate(label, (costs[label], top), textcoords="offset points", xytext=(0, 8), ha="center", fontsize=7,
+                    rotation=30)
+    ax.set_xlabel("core-seconds per training sample (crackgen bench)")
+    ax.set_ylabel("F1 at the validation threshold")
+    ax.set_ylim(0, 1)
+    ax.set_xlim(left=0)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
     fig.savefig(path)

@@ -2,6 +2,7 @@
 import csv
 import json
 import math
+import re
 from pathlib import Path
 
 import cv2
@@ -11,9 +12,18 @@ from real_folders import train_tiny_model, write_real_folder
 
 from trainer.cli import main
 from trainer.core.errors import TrainerInputError
+from trainer.experiments.benchmark import core_seconds_per_sample, parse_costs
 from trainer.experiments.config import BenchmarkOptions
 from trainer.experiments.eval_sets import parse_set
-from trainer.experiments.scoreboard import EvalSet, ModelEntry, markdown_lines, score_all, summarise, write_csv
+from trainer.experiments.scoreboard import (
+    EvalSet,
+    ModelEntry,
+    markdown_lines,
+    plot_cost,
+    score_all,
+    summarise,
+    write_csv,
+)
 from trainer.seg.metrics import ConfusionHistogram
 from trainer.seg.sources import RealFolder
 
@@ -85,6 +95,27 @@ def test_table_matches_the_hand_computed_one(tmp_path):
     assert f"| dark | 2 | {mean:.3f} ± {sd:.3f} |" in md and "| bright | 1 | 0.250 |" in md
     write_csv(list(rows.values()), tmp_path / "b.csv")
     assert len(list(csv.DictReader(open(tmp_path / "b.csv")))) == 6
+    # what a row's training sample cost: a column, and F1 against it
+    costed = "\n".join(markdown_lines(list(rows.values()), sets, {"dark": 8.25}))
+    assert "| model | n | core-s / sample | one | two |" in costed
+    assert f"| dark | 2 | 8.25 | {mean:.3f} ± {sd:.3f} |" in costed and "| bright | 1 | – | 0.250 |" in costed
+    plot_cost(list(rows.values()), sets, {"dark": 8.25, "bright": 2.0}, tmp_path / "cost.png", "t")
+    assert (tmp_path / "cost.png").stat().st_size > 0
+
+
+def test_cost_comes_from_a_crackgen_bench_file_and_bad_ones_are_one_line(tmp_path):
+    bench = tmp_path / "bench.json"
+    bench.write_text(json.dumps({"mean_total_s": 4.125, "threads": 2, "median_total_s": 4.0}))
+    assert core_seconds_per_sample(bench) == pytest.approx(8.25)
+    assert parse_costs([f"a={bench}"], ["a", "b"]) == {"a": pytest.approx(8.25)}
+    (tmp_path / "bad.json").write_text(json.dumps({"median_total_s": 4.0}))
+    for spec, msg in ((f"c={bench}", "no model row is labelled 'c'"), ("a", "expected LABEL=BENCH.json"),
+                      (f"a={tmp_path / 'none.json'}", "no such file"),
+                      (f"a={tmp_path / 'bad.json'}", "not a `crackgen bench --json` file")):
+        with pytest.raises(TrainerInputError, match=re.escape(msg)):
+            parse_costs([spec], ["a", "b"])
+    with pytest.raises(TrainerInputError, match="given twice"):
+        parse_costs([f"a={bench}", f"a={bench}"], ["a"])
 
 
 def _set_args(**kw):
@@ -112,12 +143,16 @@ def test_benchmark_cli_scores_checkpoints_at_their_validation_threshold(tiny, tm
     other = write_real_folder(tmp_path / "other", n=4)
     val = write_real_folder(tmp_path / "val", n=3)
     out = tmp_path / "b"
+    bench = tmp_path / "bench.json"
+    bench.write_text(json.dumps({"mean_total_s": 1.5, "threads": 2}))
     assert main(["benchmark", f"tiny={tiny['ckpt']}", f"tiny={tiny['ckpt']}", "--set", f"other={other}",
-                 "--val", f"v={val}", "--out", str(out), "-j", "0", "--no-progress"]) == 0
+                 "--val", f"v={val}", "--cost", f"tiny={bench}", "--out", str(out), "-j", "0", "--no-progress"]) == 0
     rows = list(csv.DictReader(open(out / "benchmark.csv")))
     assert len(rows) == 2 and {r["set"] for r in rows} == {"other"}
     assert rows[0]["threshold_source"] == "benchmark --val v"  # the tiny model stored none: chosen on --val
-    assert (out / "benchmark.png").stat().st_size > 0 and "| tiny | 2 |" in (out / "benchmark.md").read_text()
+    assert (out / "benchmark.png").stat().st_size > 0 and "| tiny | 2 | 3.00 |" in (out / "benchmark.md").read_text()
+    assert (out / "cost.png").stat().st_size > 0
+    assert json.loads((out / "benchmark.json").read_text())["core_seconds_per_sample"] == {"tiny": 3.0}
     # --errors: what the row's first model gets wrong, with overlays of its worst images
     assert main(["benchmark", f"tiny={tiny['ckpt']}", "--set", f"other={other}", "--val", f"v={val}", "--errors", "2",
                  "--out", str(tmp_path / "e"), "-j", "0", "--no-progress"]) == 0
