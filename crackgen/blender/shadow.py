@@ -7,6 +7,14 @@ image or in reflections, only in the shadows it casts. Its opacity comes from an
 alpha image (``crackgen.procedural.shadow_pattern``) mixing a black diffuse BSDF with a
 Transparent BSDF, which Cycles treats as a transparent shadow.
 Built once; per sample only its pose, pixels and visibility change.
+
+Why, with persistent data, a sample without a shadow parks the plane instead of hiding it: Cycles then kept
+the alpha image it had uploaded before the plane was hidden, so a shadow drawn after a hidden sample could
+render with an earlier sample's pattern, and a sample's image depended on what its worker had rendered
+before (found on the tiny test recipe: 3 of 10 samples differed from a fresh worker's). Parked (shrunk to a
+point 1 km below the surface, where no ray meets it) and written every sample like the surface's images, the
+plane stays in Cycles' scene and every sample matches a fresh worker's; a parked plane renders exactly as a
+hidden one. Without persistent data nothing is kept between renders, and the plane is hidden as before.
 """
 from __future__ import annotations
 
@@ -18,6 +26,10 @@ from crackgen.blender.images import ImageSlot
 from crackgen.blender.lights import frame_facing, light_direction
 from crackgen.config.spec import LightSpec, ShadowSpec
 from crackgen.errors import CrackgenError
+
+
+PARKED = np.diag([1e-6, 1e-6, 1e-6, 1.0])  # where a persistent-data scene keeps the plane without a shadow
+PARKED[2, 3] = -1000.0
 
 
 class ShadowError(CrackgenError, ValueError):
@@ -64,6 +76,16 @@ class ShadowOccluder:
         obj.hide_render = True
         scene.collection.objects.link(obj)
         self.object = obj
+        self.park = bool(swap_images)  # persistent data: park instead of hiding (module doc)
+        if self.park:
+            self._park()
+
+    def _park(self) -> None:
+        """No shadow, with persistent data: the plane shrunk to a point far below the surface, its image
+        written (the swap every sample, as the surface's images do)."""
+        self.alpha.write(self._buf.ravel())
+        self.object.matrix_world = Matrix(PARKED.tolist())
+        self.object.hide_render = False
 
     def _material(self) -> bpy.types.Material:
         mat = bpy.data.materials.new("crackgen_occluder")
@@ -88,7 +110,10 @@ class ShadowOccluder:
     def update(self, shadow: ShadowSpec, lights: list[LightSpec], alpha: np.ndarray | None) -> np.ndarray | None:
         """Show the occluder for this sample (or hide it); returns its world matrix when shown."""
         if not shadow.enabled or alpha is None:
-            self.object.hide_render = True
+            if self.park:
+                self._park()
+            else:
+                self.object.hide_render = True
             return None
         if not 0 <= shadow.light_index < len(lights):
             raise ShadowError(f"shadow.light_index {shadow.light_index} is out of range for {len(lights)} lights")
