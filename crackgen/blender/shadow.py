@@ -27,7 +27,6 @@ from crackgen.blender.lights import frame_facing, light_direction
 from crackgen.config.spec import LightSpec, ShadowSpec
 from crackgen.errors import CrackgenError
 
-
 PARKED = np.diag([1e-6, 1e-6, 1e-6, 1.0])  # where a persistent-data scene keeps the plane without a shadow
 PARKED[2, 3] = -1000.0
 
