@@ -188,10 +188,6 @@ def parse_costs(specs: list[str] | None, labels: list[str]) -> dict[str, float]:
     return costs
 
 
-def _model_labels(specs: list[str]) -> list[str]:
-    return list(dict.fromkeys(label for spec in specs for label, _ in expand_model(spec)))
-
-
 def run_benchmark(args: BenchmarkOptions) -> dict[str, Any]:
     out = Path(args.out)
     device = pick_device(args.device)
@@ -199,8 +195,8 @@ def run_benchmark(args: BenchmarkOptions) -> dict[str, Any]:
     sets = [parse_set(s, args, args.real_root) for s in specs]
     if len({s.name for s in sets}) != len(sets):
         raise TrainerInputError(f"--set names must differ, got {[s.name for s in sets]}")
-    costs = parse_costs(args.cost, _model_labels(args.models)) if args.cost else {}
     entries = build_entries(args, device, sets)
+    costs = parse_costs(args.cost, list(dict.fromkeys(e.label for e in entries))) if args.cost else {}
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     bar = tqdm(total=len(entries) * len(sets), desc="benchmark", disable=args.no_progress)
