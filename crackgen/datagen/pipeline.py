@@ -233,10 +233,10 @@ class SampleProducer:
             run_spec = spec
             if self.threads > 0:
                 run_spec = dataclasses.replace(spec, render=dataclasses.replace(spec.render, threads=self.threads))
-            # the same scene's next view: the mesh and textures Blender holds are this build's already. Not with
-            # persistent data, where Cycles keeps its own copies between renders: there the views re-upload, as
-            # one-view samples do, so a kept mesh cannot make a view depend on what its worker rendered before
-            reuse = self.recipe.camera.views_per_scene > 1 and not self.recipe.render.persistent_data
+            # the same scene's next view: the mesh and textures Blender holds are this build's already (with
+            # persistent data Cycles keeps its copies too; a worker starting inside a scene uploads them fresh and
+            # renders the same pixels: tests/datagen/test_persistent_data.py)
+            reuse = self.recipe.camera.views_per_scene > 1
             same = build.key if reuse else None
             scene_meta = scene.update(run_spec, rig, build.world, maps, alpha, surface_key=same)
         with tm.stage("render"):
