@@ -21,6 +21,8 @@ def run(args: argparse.Namespace) -> int:
 
     r = run_benchmark(options_from(BenchmarkOptions, args))
     print(Path(r["out"], "benchmark.md").read_text())
+    plots = "".join(f", {name}" for name, on in (("cost.png", r["core_seconds_per_sample"]),
+                                                 ("volume.png", r["renders"])) if on)
     print(f"scored {r['models']} models ({r['labels']} rows) on {len(r['sets'])} sets in {r['seconds']} s; "
-          f"wrote {r['out']}/benchmark.csv, .md, .png, .json")
+          f"wrote {r['out']}/benchmark.csv, .md, .png, .json{plots}")
     return 0

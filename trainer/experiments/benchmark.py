@@ -18,7 +18,7 @@ import json
 import logging
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, TypeVar
 
 import torch
 from tqdm import tqdm
@@ -43,6 +43,7 @@ from trainer.experiments.scoreboard import (
     markdown_lines,
     plot_bars,
     plot_cost,
+    plot_volume,
     score_all,
     write_csv,
 )
@@ -53,6 +54,7 @@ from trainer.seg.threshold import choose_threshold, stored_threshold
 log = logging.getLogger(__name__)
 
 DEFAULT_SETS = (DEEPCRACK_TEST, *CROSS_DOMAIN_SETS)
+T = TypeVar("T")
 
 
 def add_benchmark_args(p: argparse.ArgumentParser) -> None:
@@ -75,6 +77,9 @@ def add_benchmark_args(p: argparse.ArgumentParser) -> None:
                    help="what one sample of LABEL's training data cost to make: a `crackgen bench --json` file "
                         "(core-seconds per sample = its mean s/sample x its Cycles threads); adds a cost column and "
                         "cost.png, F1 against core-seconds per sample (repeatable)")
+    p.add_argument("--renders", action="append", default=None, metavar="LABEL=N",
+                   help="how many renders LABEL's models trained on; adds a renders column and volume.png, F1 against "
+                        "the number of renders: the data-volume curve (repeatable)")
     p.add_argument("--workers", "-j", type=int, default=2)
     p.add_argument("--device", default=None)
     p.add_argument("--no-progress", action="store_true")
@@ -175,17 +180,34 @@ def core_seconds_per_sample(path: str | Path) -> float:
 
 def parse_costs(specs: list[str] | None, labels: list[str]) -> dict[str, float]:
     """``LABEL=BENCH.json`` options -> label -> core-seconds per sample; every label must name a model row."""
-    costs: dict[str, float] = {}
+    return _per_label("--cost", "BENCH.json", specs, labels, core_seconds_per_sample)
+
+
+def parse_renders(specs: list[str] | None, labels: list[str]) -> dict[str, int]:
+    """``LABEL=N`` options -> label -> number of training renders; every label must name a model row."""
+    def count(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            n = 0
+        if n <= 0:
+            raise TrainerInputError(f"--renders: {text!r} is not a whole number of renders > 0")
+        return n
+    return _per_label("--renders", "N", specs, labels, count)
+
+
+def _per_label(option: str, what: str, specs: list[str] | None, labels: list[str], read: Callable[[str], T]) -> dict[str, T]:
+    found: dict[str, T] = {}
     for spec in specs or []:
-        label, sep, path = spec.partition("=")
-        if not sep or not label or not path:
-            raise TrainerInputError(f"--cost {spec!r}: expected LABEL=BENCH.json")
+        label, sep, value = spec.partition("=")
+        if not sep or not label or not value:
+            raise TrainerInputError(f"{option} {spec!r}: expected LABEL={what}")
         if label not in labels:
-            raise TrainerInputError(f"--cost {spec!r}: no model row is labelled {label!r} (rows: {', '.join(labels)})")
-        if label in costs:
-            raise TrainerInputError(f"--cost: {label!r} given twice")
-        costs[label] = core_seconds_per_sample(path)
-    return costs
+            raise TrainerInputError(f"{option} {spec!r}: no model row is labelled {label!r} (rows: {', '.join(labels)})")
+        if label in found:
+            raise TrainerInputError(f"{option}: {label!r} given twice")
+        found[label] = read(value)
+    return found
 
 
 def run_benchmark(args: BenchmarkOptions) -> dict[str, Any]:
@@ -196,7 +218,9 @@ def run_benchmark(args: BenchmarkOptions) -> dict[str, Any]:
     if len({s.name for s in sets}) != len(sets):
         raise TrainerInputError(f"--set names must differ, got {[s.name for s in sets]}")
     entries = build_entries(args, device, sets)
-    costs = parse_costs(args.cost, list(dict.fromkeys(e.label for e in entries))) if args.cost else {}
+    labels = list(dict.fromkeys(e.label for e in entries))
+    costs = parse_costs(args.cost, labels) if args.cost else {}
+    renders = parse_renders(args.renders, labels) if args.renders else {}
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     bar = tqdm(total=len(entries) * len(sets), desc="benchmark", disable=args.no_progress)
@@ -212,13 +236,15 @@ def run_benchmark(args: BenchmarkOptions) -> dict[str, Any]:
     errors = error_table(entries, sets, out, args.errors) if args.errors > 0 else []
     title = args.title or f"benchmark of {len(entries)} models on {len(sets)} sets"
     write_csv(rows, out / "benchmark.csv")
-    md = [f"# {title}", "", *markdown_lines(rows, sets, costs), *errors]
+    md = [f"# {title}", "", *markdown_lines(rows, sets, costs, renders), *errors]
     (out / "benchmark.md").write_text("\n".join(md) + "\n")
     plot_bars(rows, sets, out / "benchmark.png", title)
     if costs:
         plot_cost(rows, sets, costs, out / "cost.png", title)
+    if renders:
+        plot_volume(rows, sets, renders, out / "volume.png", title)
     result = {"models": len(entries), "labels": len({e.label for e in entries}), "sets": [s.name for s in sets],
               "seconds": round(time.perf_counter() - t0, 1), "out": str(out),
-              "core_seconds_per_sample": costs, "rows": [r.__dict__ for r in rows]}
+              "core_seconds_per_sample": costs, "renders": renders, "rows": [r.__dict__ for r in rows]}
     (out / "benchmark.json").write_text(json.dumps(result, indent=1))
     return result

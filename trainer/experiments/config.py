@@ -63,6 +63,7 @@ class BenchmarkOptions(SplitArgs):
     title: str | None = None
     errors: int = 0
     cost: list[str] | None = None
+    renders: list[str] | None = None
     workers: int = 2
     device: str | None = None
     no_progress: bool = False

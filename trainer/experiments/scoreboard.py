@@ -116,20 +116,23 @@ def summarise(rows: Sequence[ScoreRow]) -> dict[str, dict[str, dict[str, tuple[f
 
 
 def markdown_lines(rows: Sequence[ScoreRow], sets: Sequence[EvalSet],
-                   costs: Mapping[str, float] | None = None) -> list[str]:
+                   costs: Mapping[str, float] | None = None, renders: Mapping[str, int] | None = None) -> list[str]:
     """Headline table (F1 at the validation threshold, one column per set; with ``costs``, label -> core-seconds
-    per training sample, a cost column) and the full table."""
+    per training sample, a cost column; with ``renders``, label -> training renders, a renders column) and the
+    full table."""
     summ = summarise(rows)
     names = [s.name for s in sets]
     n_models = {label: sum(r.label == label and r.set == next(iter(by_set)) for r in rows)
                 for label, by_set in summ.items()}
-    cost_head, cost_rule = ("core-s / sample | ", "---|") if costs else ("", "")
+    extra = [(head, values, form) for head, values, form in
+             (("renders", renders, "{:d}"), ("core-s / sample", costs, "{:.2f}")) if values]
     lines = ["F1 at each model's validation threshold (mean ± sample sd over the models of a row):", "",
-             f"| model | n | {cost_head}" + " | ".join(names) + " |", f"|---|---|{cost_rule}" + "---|" * len(names)]
+             "| model | n | " + "".join(f"{head} | " for head, _, _ in extra) + " | ".join(names) + " |",
+             "|---|---|" + "---|" * len(extra) + "---|" * len(names)]
     for label, by_set in summ.items():
         cells = [fmt(*by_set[n][HEADLINE][:2]) if n in by_set else "–" for n in names]
-        cost = (f"{costs[label]:.2f} | " if label in costs else "– | ") if costs else ""
-        lines.append(f"| {label} | {n_models[label]} | {cost}" + " | ".join(cells) + " |")
+        known = "".join((form.format(values[label]) if label in values else "–") + " | " for _, values, form in extra)
+        lines.append(f"| {label} | {n_models[label]} | {known}" + " | ".join(cells) + " |")
     lines += ["", "All figures (P, R, F1 and IoU at the validation threshold; F1 at 0.5; oracle F1 at the set's "
               "own best threshold, which looks at the labels being scored):", "",
               "| model | set | precision | recall | **F1** | IoU | F1 @ 0.5 | oracle F1 |", "|---|---|---|---|---|---|---|---|"]
@@ -188,28 +191,48 @@ def plot_cost(rows: Sequence[ScoreRow], sets: Sequence[EvalSet], costs: Mapping[
               title: str) -> None:
     """F1 (mean ± sd over a row's models) against the core-seconds one training sample of the row cost: one line
     per set through the rows that have a cost, each point named by its row."""
+    plot_against(rows, sets, costs, path, title, "core-seconds per training sample (crackgen bench)")
+
+
+def plot_volume(rows: Sequence[ScoreRow], sets: Sequence[EvalSet], renders: Mapping[str, int], path: Path,
+                title: str) -> None:
+    """F1 against the number of training renders (log2 axis: the data-volume curve), one line per set."""
+    plot_against(rows, sets, renders, path, title, "training renders (log scale)", log2=True)
+
+
+def plot_against(rows: Sequence[ScoreRow], sets: Sequence[EvalSet], xs: Mapping[str, float], path: Path,
+                 title: str, xlabel: str, log2: bool = False) -> None:
+    """F1 (mean ± sd over a row's models) against one number per row: a line per set through the rows that have
+    one, each point named by its row."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     summ = summarise(rows)
-    labels = sorted((label for label in summ if label in costs), key=lambda label: costs[label])
+    labels = sorted((label for label in summ if label in xs), key=lambda label: xs[label])
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
     for s in sets:
-        pts = [(costs[label], *summ[label][s.name][HEADLINE][:2]) for label in labels if s.name in summ[label]]
+        pts = [(xs[label], *summ[label][s.name][HEADLINE][:2]) for label in labels if s.name in summ[label]]
         if not pts:
             continue
         x, mean, sd = (np.asarray(v, dtype=np.float64) for v in zip(*pts))
         ax.errorbar(x, mean, yerr=np.nan_to_num(sd), marker="o", capsize=3, label=s.name)
     top = max((summ[label][n][HEADLINE][0] for label in labels for n in summ[label]), default=1.0)
     for label in labels:
-        ax.annotate(label, (costs[label], top), textcoords="offset points", xytext=(0, 8), ha="center", fontsize=7,
+        ax.annotate(label, (xs[label], top), textcoords="offset points", xytext=(0, 8), ha="center", fontsize=7,
                     rotation=30)
-    ax.set_xlabel("core-seconds per training sample (crackgen bench)")
+    ax.set_xlabel(xlabel)
     ax.set_ylabel("F1 at the validation threshold")
     ax.set_ylim(0, 1)
-    ax.set_xlim(left=0)
+    if log2:
+        ax.set_xscale("log", base=2)
+        ax.set_xticks(sorted(set(xs[label] for label in labels)))
+        from matplotlib.ticker import ScalarFormatter
+
+        ax.get_xaxis().set_major_formatter(ScalarFormatter())
+    else:
+        ax.set_xlim(left=0)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
     ax.set_title(title, fontsize=9)

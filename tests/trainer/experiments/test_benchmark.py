@@ -12,7 +12,7 @@ from real_folders import train_tiny_model, write_real_folder
 
 from trainer.cli import main
 from trainer.core.errors import TrainerInputError
-from trainer.experiments.benchmark import core_seconds_per_sample, parse_costs
+from trainer.experiments.benchmark import core_seconds_per_sample, parse_costs, parse_renders
 from trainer.experiments.config import BenchmarkOptions
 from trainer.experiments.eval_sets import parse_set
 from trainer.experiments.scoreboard import (
@@ -20,6 +20,7 @@ from trainer.experiments.scoreboard import (
     ModelEntry,
     markdown_lines,
     plot_cost,
+    plot_volume,
     score_all,
     summarise,
     write_csv,
@@ -101,6 +102,12 @@ def test_table_matches_the_hand_computed_one(tmp_path):
     assert f"| dark | 2 | 8.25 | {mean:.3f} ± {sd:.3f} |" in costed and "| bright | 1 | – | 0.250 |" in costed
     plot_cost(list(rows.values()), sets, {"dark": 8.25, "bright": 2.0}, tmp_path / "cost.png", "t")
     assert (tmp_path / "cost.png").stat().st_size > 0
+    # how many renders a row trained on: a column before the cost, and the data-volume curve
+    both = "\n".join(markdown_lines(list(rows.values()), sets, {"dark": 8.25}, {"dark": 800, "bright": 200}))
+    assert "| model | n | renders | core-s / sample | one | two |" in both
+    assert f"| dark | 2 | 800 | 8.25 | {mean:.3f} ± {sd:.3f} |" in both and "| bright | 1 | 200 | – | 0.250 |" in both
+    plot_volume(list(rows.values()), sets, {"dark": 800, "bright": 200}, tmp_path / "volume.png", "t")
+    assert (tmp_path / "volume.png").stat().st_size > 0
 
 
 def test_cost_comes_from_a_crackgen_bench_file_and_bad_ones_are_one_line(tmp_path):
@@ -116,6 +123,17 @@ def test_cost_comes_from_a_crackgen_bench_file_and_bad_ones_are_one_line(tmp_pat
             parse_costs([spec], ["a", "b"])
     with pytest.raises(TrainerInputError, match="given twice"):
         parse_costs([f"a={bench}", f"a={bench}"], ["a"])
+
+
+def test_renders_name_a_row_and_a_positive_count_or_are_refused_in_one_line():
+    assert parse_renders(["a=400", "b=1600"], ["a", "b"]) == {"a": 400, "b": 1600}
+    for spec, msg in (("c=400", "no model row is labelled 'c'"), ("a", "expected LABEL=N"),
+                      ("a=many", "'many' is not a whole number of renders > 0"), ("a=0", "'0' is not a whole number"),
+                      ("a=2.5", "'2.5' is not a whole number")):
+        with pytest.raises(TrainerInputError, match=re.escape(msg)):
+            parse_renders([spec], ["a", "b"])
+    with pytest.raises(TrainerInputError, match="--renders: 'a' given twice"):
+        parse_renders(["a=1", "a=2"], ["a"])
 
 
 def _set_args(**kw):
@@ -146,13 +164,15 @@ def test_benchmark_cli_scores_checkpoints_at_their_validation_threshold(tiny, tm
     bench = tmp_path / "bench.json"
     bench.write_text(json.dumps({"mean_total_s": 1.5, "threads": 2}))
     assert main(["benchmark", f"tiny={tiny['ckpt']}", f"tiny={tiny['ckpt']}", "--set", f"other={other}",
-                 "--val", f"v={val}", "--cost", f"tiny={bench}", "--out", str(out), "-j", "0", "--no-progress"]) == 0
+                 "--val", f"v={val}", "--cost", f"tiny={bench}", "--renders", "tiny=400", "--out", str(out), "-j", "0",
+                 "--no-progress"]) == 0
     rows = list(csv.DictReader(open(out / "benchmark.csv")))
     assert len(rows) == 2 and {r["set"] for r in rows} == {"other"}
     assert rows[0]["threshold_source"] == "benchmark --val v"  # the tiny model stored none: chosen on --val
-    assert (out / "benchmark.png").stat().st_size > 0 and "| tiny | 2 | 3.00 |" in (out / "benchmark.md").read_text()
-    assert (out / "cost.png").stat().st_size > 0
-    assert json.loads((out / "benchmark.json").read_text())["core_seconds_per_sample"] == {"tiny": 3.0}
+    assert (out / "benchmark.png").stat().st_size > 0 and "| tiny | 2 | 400 | 3.00 |" in (out / "benchmark.md").read_text()
+    assert (out / "cost.png").stat().st_size > 0 and (out / "volume.png").stat().st_size > 0
+    record = json.loads((out / "benchmark.json").read_text())
+    assert record["core_seconds_per_sample"] == {"tiny": 3.0} and record["renders"] == {"tiny": 400}
     # --errors: what the row's first model gets wrong, with overlays of its worst images
     assert main(["benchmark", f"tiny={tiny['ckpt']}", "--set", f"other={other}", "--val", f"v={val}", "--errors", "2",
                  "--out", str(tmp_path / "e"), "-j", "0", "--no-progress"]) == 0
