@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import math
+import textwrap
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Callable, Iterable, Mapping, Protocol, Sequence
@@ -181,7 +182,7 @@ def plot_bars(rows: Sequence[ScoreRow], sets: Sequence[EvalSet], path: Path, tit
     ax.set_ylim(0, 1)
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
-    ax.set_title(title, fontsize=9)
+    ax.set_title(textwrap.fill(title, 100), fontsize=9)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
@@ -234,8 +235,8 @@ def plot_against(rows: Sequence[ScoreRow], sets: Sequence[EvalSet], xs: Mapping[
     else:
         ax.set_xlim(left=0)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=7, loc="lower right")
+    ax.set_title(textwrap.fill(title, 100), fontsize=9)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
