@@ -55,6 +55,7 @@ from crackgen.sim.sensors.lidar import simulate_lidar
 from crackgen.sim.sensors.stereo import simulate_stereo
 from crackgen.sim.sensors.tof import albedo_from_map, simulate_tof
 from crackgen.sim.visible_gt import visible_ground_truth
+from fusion.geometry.lens import warp
 
 STAGES = ("spec", "crackmap", "surface", "materials", "shadow", "scene_update", "render",
           "raycast", "groundtruth", "tof", "lidar", "stereo", "lens", "camera_effects", "adapt")
@@ -264,9 +265,12 @@ class SampleProducer:
         if self.recipe.label.policy != "thesis":  # both labels on the same render, to compare
             members["mask_thesis.png"] = label.thesis
         sensors, camera_views, camera_effects_meta = _simulate_sensors(spec, rig, caster, maps, out, gt, tm, members)
+        rgb_linear = out.rgb_linear
         if lens_map is not None:  # the lens, before the camera's effects: every RGB-view member, one map
             with tm.stage("lens"):
                 members = warp_view_members(members, lens_map)
+                if rgb_linear is not None:  # the bench's copy too: it is compared with the (distorted) label
+                    rgb_linear = warp(rgb_linear, lens_map, nearest=False)
                 if camera_views is not None:  # SGBM matched effect-applied canvas views (sgbm_input = "camera")
                     camera_views = warp_view_members(camera_views, lens_map)
         # post-render image stages: RGB views only, after every sensor has read the clean render
@@ -302,7 +306,7 @@ class SampleProducer:
             "recipe_hash": self.recipe.hash,
             "versions": {"crackgen": crackgen.__version__, "spec": spec.version, **_blender_version()},
         }
-        return Sample(index=int(index), members=members, meta=meta, timings=tm.t, rgb_linear=out.rgb_linear)
+        return Sample(index=int(index), members=members, meta=meta, timings=tm.t, rgb_linear=rgb_linear)
 
     def produce(self, index: int) -> tuple[dict[str, Any], dict[str, Any]]:
         """(members, meta) of sample ``index``: what a shard holds for it (``json`` = meta)."""

@@ -108,3 +108,19 @@ def test_a_lens_that_folds_back_is_refused_in_the_recipe():
     with pytest.raises(RecipeError, match="camera.distortion: k1 = -0.9"):
         parse_recipe(tiny_recipe(1) + "[camera.distortion]\nprobability = 0.5\nk1 = { min = -0.9, max = 0.0 }\n")
     parse_recipe(tiny_recipe(1) + "[camera.distortion]\nprobability = 0.5\n")  # the default ranges are fine
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_the_bench_copy_of_the_linear_render_is_in_the_distorted_frame():
+    """`crackgen bench --sweep` compares the scene-linear render with the label: both must be the output frame
+    (the canvas is wider: a 272 px render against a 256 px label stopped a sweep of recipes/inspect.toml)."""
+    prod = SampleProducer(parse_recipe(_recipe(LENS)), threads=1, keep_linear=True)
+    try:
+        s = prod.make(0)
+    finally:
+        prod.close()
+    lum = s.rgb_linear.mean(axis=2)
+    assert lum.shape == (H, W) and lum.dtype == np.float32
+    label = s.members["mask.png"] > 0
+    assert lum[label].mean() < 0.6 * lum[~label].mean()  # on the dark crack, as the label is
