@@ -6,7 +6,8 @@
 - ``manifest``: ``manifest.json``, shard names, recorded versions;
 - ``writer``: ``ShardWriter``, all-or-nothing tars;
 - ``reader``: ``iter_samples`` and friends (what the trainer imports);
-- ``verify``: ``verify_dataset``, every problem of a dataset, one line each.
+- ``verify``: ``verify_dataset``, every problem of a dataset, one line each;
+- ``scenes``: which samples are views of one scene (the unit of a hold-out split).
 
 ``from crackgen.shards import iter_samples`` is the public reader contract.
 """
@@ -31,6 +32,7 @@ from crackgen.shards.reader import (
     open_dataset,
     split_shards,
 )
+from crackgen.shards.scenes import scene_group, views_per_scene
 from crackgen.shards.storage import StorageError
 from crackgen.shards.verify import verify_dataset
 from crackgen.shards.writer import ShardWriter, clean_partials, sample_key
@@ -40,6 +42,8 @@ __all__ = [
     "iter_samples", "load_sample", "list_shards", "split_shards", "open_dataset", "ShardDataset", "ShardRef",
     # writer
     "ShardWriter", "sample_key", "clean_partials",
+    # scenes (hold-out groups)
+    "views_per_scene", "scene_group",
     # verify
     "verify_dataset",
     # manifest

@@ -5,7 +5,8 @@ Shared by segmentation and depth fusion, so neither needs the other's data code.
 from __future__ import annotations
 
 import hashlib
-from typing import Sequence
+from pathlib import Path
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -32,3 +33,25 @@ def key_in_val(key: str, fraction: float, seed: int) -> bool:
     """Streaming-friendly split: a key is validation when its seeded hash < fraction."""
     h = hashlib.blake2b(f"{seed}:{key}".encode(), digest_size=8).digest()
     return int.from_bytes(h, "little") / 2.0**64 < fraction
+
+
+def split_fraction_by_group(names: Sequence[str], group_of: Callable[[str], str], fraction: float,
+                            seed: int) -> tuple[list[str], list[str]]:
+    """``split_fraction`` over the groups of ``names`` (views of one scene, tiles of one photo): a group is
+    held out whole. With every name its own group the result is ``split_fraction(names, ...)``."""
+    groups = {n: group_of(n) for n in names}
+    _, out_groups = split_fraction(sorted(set(groups.values())), fraction, seed)
+    out = set(out_groups)
+    return sorted(n for n in names if groups[n] not in out), sorted(n for n in names if groups[n] in out)
+
+
+def shard_groups(path: str | Path) -> Callable[[str], str]:
+    """The hold-out group of each sample key of a shard dataset: its scene when the recipe rendered several
+    views per scene (the manifest says), else the key itself."""
+    from crackgen.shards import ManifestError, scene_group, views_per_scene
+
+    try:
+        k = views_per_scene(path) if Path(path).is_dir() else 1
+    except ManifestError as exc:
+        raise TrainerInputError(str(exc)) from None
+    return lambda key: scene_group(key, k)

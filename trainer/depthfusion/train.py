@@ -35,7 +35,7 @@ from fusion.depth.metrics import disparity_metrics
 from trainer.core.checkpoint import load_checkpoint, save_checkpoint
 from trainer.core.device import pick_device
 from trainer.core.errors import TrainerInputError
-from trainer.core.holdout import split_fraction
+from trainer.core.holdout import shard_groups, split_fraction_by_group
 from trainer.core.options import options_dict
 from trainer.depthfusion.augment import corrupt_scene_stereo, corrupt_stereo
 from trainer.depthfusion.config import FusionTrainConfig
@@ -128,7 +128,8 @@ def build_split(args: FusionTrainConfig) -> tuple[list[str], list[str]]:
     keys = shard_keys(args.data)
     if len(keys) < 2:
         raise TrainerInputError(f"--data {args.data} has {len(keys)} sample(s); fusion training needs at least 2")
-    train_keys, val_keys = split_fraction(keys, args.val_fraction, args.split_seed)
+    train_keys, val_keys = split_fraction_by_group(keys, shard_groups(args.data), args.val_fraction,
+                                                   args.split_seed)  # views of one scene on one side
     if not train_keys:
         raise TrainerInputError(f"--val-fraction {args.val_fraction} leaves no training sample of {len(keys)}")
     return train_keys, val_keys

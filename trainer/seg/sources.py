@@ -29,7 +29,7 @@ from typing import Any, Iterator, Sequence
 import numpy as np
 
 from trainer.core.errors import TrainerInputError
-from trainer.core.holdout import key_in_val
+from trainer.core.holdout import key_in_val, shard_groups
 from trainer.core.imageio import DEPTH_EXTS, IMAGE_EXTS, read_float_map, read_mask, read_rgb
 from trainer.seg.depth import align_to_rgb, disparity_to_depth, scaled_depth
 
@@ -249,6 +249,7 @@ class ShardSource:
             raise TrainerInputError(f"--mask-member must name a PNG label member like mask.png, got {self.mask_member!r}")
         self.shards = list_shards(self.path)
         label = f"{self.label_key}.png"
+        groupers: dict[Path, Any] = {}  # one per dataset folder (``A,B`` lists several)
         for s in self.shards:
             members = shard_members(s)
             lacking = [k for k, names in members.items() if label not in names]
@@ -258,7 +259,10 @@ class ShardSource:
             keys = list(members)
             if self.split != "all":
                 want_val = self.split == "val"
-                keys = [k for k in keys if key_in_val(k, self.val_fraction, self.seed) == want_val]
+                if s.parent not in groupers:
+                    groupers[s.parent] = shard_groups(s.parent)  # views of one scene stay on one side
+                group_of = groupers[s.parent]
+                keys = [k for k in keys if key_in_val(group_of(k), self.val_fraction, self.seed) == want_val]
             self.shard_keys.append(keys)
         if sum(map(len, self.shard_keys)) == 0:
             raise TrainerInputError(f"{self.path}: no samples in the '{self.split}' split")

@@ -182,3 +182,48 @@ def test_split_and_mix_rules():
     assert split_fraction(names, 0.2, seed=4)[1] != test
     assert mix_repeat(300, 10000) == 33 and 33 * 300 < 10000 <= 34 * 300
     assert mix_repeat(300, 900) == 2 and mix_repeat(300, 100) == 1
+
+
+def test_grouped_split_holds_whole_groups_out_and_equals_the_plain_split_for_singletons():
+    from trainer.core.holdout import split_fraction_by_group
+
+    names = [f"{i:06d}-{i:05d}" for i in range(40)]
+    assert split_fraction_by_group(names, lambda n: n, 0.25, seed=5) == split_fraction(names, 0.25, seed=5)
+    train, val = split_fraction_by_group(names, lambda n: str(int(n[-5:]) // 4), 0.3, seed=5)
+    assert sorted(train + val) == names and len(val) == 12  # 10 groups of 4: 3 held out
+    assert not {int(n[-5:]) // 4 for n in train} & {int(n[-5:]) // 4 for n in val}
+
+
+def test_shard_source_keeps_the_views_of_one_scene_on_one_side(tmp_path):
+    """A recipe with views_per_scene = 4: the synthetic validation split holds out whole scenes, never
+    single views whose siblings train (with one view per scene the split is the per-key one, as before)."""
+    from crackgen.shards import Manifest, ShardWriter, sample_key
+    from crackgen.tools.bench_shards import synthetic_sample
+    from trainer.core.holdout import key_in_val
+    from trainer.seg.sources import ShardSource
+
+    rng = np.random.default_rng(0)
+    infos = []
+    for s in range(3):
+        with ShardWriter(tmp_path, s) as w:
+            for i in range(s * 6, s * 6 + 6):  # 6 per shard: scenes of 4 views straddle shards
+                smp = synthetic_sample(rng, 32, 8)
+                w.add(sample_key(s, i), {k: smp[k] for k in ("rgb.png", "mask.png", "depth.exr", "json")})
+        infos.append(w.info)
+
+    def sides(k):
+        m = Manifest(tmp_path, recipe_text="", recipe_hash="h", recipe_canonical={"camera": {"views_per_scene": k}},
+                     num_shards=3, shard_size=6)
+        for info in infos:
+            m.mark_done(info)
+        m.save()
+        train = ShardSource(tmp_path, depth="gt", val_fraction=0.4, split="train", seed=2)
+        val = ShardSource(tmp_path, depth="gt", val_fraction=0.4, split="val", seed=2)
+        return [x for ks in train.shard_keys for x in ks], [x for ks in val.shard_keys for x in ks]
+
+    train, val = sides(4)
+    assert len(train) + len(val) == 18 and val and train
+    scenes = lambda keys: {int(k[-5:]) // 4 for k in keys}  # noqa: E731
+    assert not scenes(train) & scenes(val)
+    train1, val1 = sides(1)
+    assert sorted(val1) == sorted(k for k in train1 + val1 if key_in_val(k, 0.4, 2))
