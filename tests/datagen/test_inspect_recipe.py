@@ -28,7 +28,7 @@ def test_inspect_recipe_draws_every_surface_distance_lens_and_sky():
     assert max(px) / min(px) > 10
     assert 0.2 < np.mean([s.lens.enabled for s in specs]) < 0.5 and 0.25 < np.mean([s.sky.enabled for s in specs]) < 0.55
     darkening = [s.material.crack_darkening for s in specs]
-    assert np.mean(np.array(darkening) > 0.8) > 0.2  # faint cracks are common
+    assert 0.08 < np.mean(np.array(darkening) > 0.8) < 0.3  # faint cracks: a thin tail (v4), present but not common
 
 
 @pytest.mark.blender
