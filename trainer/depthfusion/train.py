@@ -4,7 +4,7 @@ Thesis Ch. 3.3 / 4.6 after Agresti et al. 2019: targets C* = exp(-|D - D_GT|)
 for the stereo and the ToF (or LiDAR) disparity, MSE loss over pixels with a
 GT value, Adadelta lr 0.01, batch 32, random 128-px patches with flips and
 +-5 deg rotation. Data: shards of ``recipes/stereo_tof.toml``; a seeded
-fraction of the samples (``--val-fraction``) is held out, and its keys are
+fraction of the samples (``--val-fraction``; whole scenes) is held out, and its keys are
 stored in the checkpoint so ``cracktrain fusion-eval`` scores exactly them.
 
 Shape, as in torchvision's references: ``build_*`` make the pieces,
@@ -66,7 +66,7 @@ def add_fusion_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--variant", choices=tuple(VARIANTS), default="tof",
                    help="tof: 4 channels (stereo, ToF, L-R diff, amplitude); lidar: 3 channels (stereo, LiDAR, "
                         "L-R diff warped by the LiDAR); lidar4: lidar + the L-R diff warped by the stereo")
-    p.add_argument("--val-fraction", type=float, default=0.2, help="held-out fraction of the samples")
+    p.add_argument("--val-fraction", type=float, default=0.2, help="held-out fraction of the samples (whole scenes when the recipe rendered several views per scene)")
     p.add_argument("--split-seed", type=int, default=0)
     p.add_argument("--crop", dest="patch", type=int, default=128, help="random patch side (px)")
     deprecated_alias(p, "--patch", "--crop", "cracktrain")

@@ -103,7 +103,7 @@ def add_seg_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--val-data", default=None, help="synthetic validation shards")
     p.add_argument("--val-real", default=None, help="real validation folder")
     p.add_argument("--val-fraction", type=float, default=0.0,
-                   help="hold out this fraction of --data/--real for validation")
+                   help="hold out this fraction of --data/--real for validation (whole scenes of --data, whole groups of --real)")
     p.add_argument("--split-seed", type=int, default=0)
     p.add_argument("--group-pattern", default=DEFAULT_GROUP_PATTERN, metavar="REGEX",
                    help="--val-fraction of a real folder keeps groups whole: a file's group is the first capture "
