@@ -66,7 +66,8 @@ def add_fusion_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--variant", choices=tuple(VARIANTS), default="tof",
                    help="tof: 4 channels (stereo, ToF, L-R diff, amplitude); lidar: 3 channels (stereo, LiDAR, "
                         "L-R diff warped by the LiDAR); lidar4: lidar + the L-R diff warped by the stereo")
-    p.add_argument("--val-fraction", type=float, default=0.2, help="held-out fraction of the samples (whole scenes when the recipe rendered several views per scene)")
+    p.add_argument("--val-fraction", type=float, default=0.2,
+                   help="held-out fraction of the samples (whole scenes when the recipe rendered several views per scene)")
     p.add_argument("--split-seed", type=int, default=0)
     p.add_argument("--crop", dest="patch", type=int, default=128, help="random patch side (px)")
     deprecated_alias(p, "--patch", "--crop", "cracktrain")
