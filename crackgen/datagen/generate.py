@@ -134,7 +134,10 @@ def prepare_output(recipe: Recipe, out: str, resume: bool, storage_options: Mapp
                                 "choose an empty --out")
         manifest = Manifest.for_recipe(out, recipe, versions=versions, storage_options=storage_options)
     if not is_url(out):
-        os.makedirs(local_path(out), exist_ok=True)
+        try:
+            os.makedirs(local_path(out), exist_ok=True)
+        except OSError as exc:  # a parent that is a file, a broken link, no permission, a full disk
+            raise GenerateError(f"{out}: cannot create the output directory ({exc.strerror or exc})") from None
         clean_partials(out)
     todo = []
     for task in plan:

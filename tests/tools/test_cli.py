@@ -54,6 +54,21 @@ def test_generate_refuses_non_empty_dir_without_resume(tmp_path, capsys):
     assert keep.read_text() == "mine" and sorted(p.name for p in out.iterdir()) == ["precious.txt"]
 
 
+@pytest.mark.parametrize("parent", ["broken_link", "file"])
+def test_generate_uncreatable_out_is_one_line(tmp_path, capsys, parent):
+    """An --out under a dangling link or a file fails with one line naming it, not a traceback."""
+    base = tmp_path / "data"
+    if parent == "broken_link":
+        base.symlink_to(tmp_path / "gone")
+    else:
+        base.write_text("not a folder")
+    out = base / "closeup"
+    assert main(["generate", str(ROOT / "recipes" / "demo.toml"), "--out", str(out)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(out) in err and "cannot create the output directory" in err
+    assert not (tmp_path / "gone").exists()
+
+
 def test_resume_refuses_foreign_dir_and_other_recipe(tmp_path, capsys):
     from crackgen.config.recipe import load_recipe
     from crackgen.shards.manifest import Manifest
