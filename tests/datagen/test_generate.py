@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from run_watch import done_shards, wait_for
 from tiny_recipes import tiny_recipe
 
 from crackgen.config.recipe import parse_recipe
@@ -179,23 +180,6 @@ def test_worker_replaced_after_each_shard_gives_byte_identical_shards(reference,
 
 # ---------------------------------------------------------------- crashes and resume
 
-def _wait(cond, timeout: float, what: str):
-    t0 = time.time()
-    while time.time() - t0 < timeout:
-        v = cond()
-        if v:
-            return v
-        time.sleep(0.1)
-    raise AssertionError(f"timed out waiting for {what}")
-
-
-def _done_shards(out: Path) -> int:
-    try:
-        return len(json.loads((out / "manifest.json").read_text())["shards"])
-    except (OSError, ValueError, KeyError):
-        return 0
-
-
 def test_kill_one_worker_mid_shard_then_resume(reference, tmp_path):
     import psutil
 
@@ -210,7 +194,7 @@ def test_kill_one_worker_mid_shard_then_resume(reference, tmp_path):
         kids = [k for k in driver.children() if "spawn_main" in " ".join(k.cmdline())]
         return kids[0] if kids else None
 
-    victim = _wait(worker_mid_shard, 240, "a worker writing a shard")
+    victim = wait_for(worker_mid_shard, 240, "a worker writing a shard")
     victim.send_signal(signal.SIGKILL)
     try:
         _, err = proc.communicate(timeout=120)  # must not hang
@@ -232,7 +216,7 @@ def test_kill_one_worker_mid_shard_then_resume(reference, tmp_path):
 def test_kill_whole_run_then_resume(reference, tmp_path):
     out = tmp_path / "killall"
     proc = cli("generate", str(reference["recipe"]), "--out", str(out), "--workers", "1", "--no-progress")
-    _wait(lambda: _done_shards(out) >= 1, 240, "the first finished shard")
+    wait_for(lambda: done_shards(out) >= 1, 240, "the first finished shard")
     os.killpg(proc.pid, signal.SIGKILL)  # driver and workers at once
     proc.wait(timeout=30)
     m = Manifest.load(out)
@@ -255,7 +239,7 @@ def test_workers_exit_when_the_driver_is_killed_alone_then_resume(reference, tmp
     out = tmp_path / "killdriver"
     proc = cli("generate", str(reference["recipe"]), "--out", str(out), "--workers", "2", "--no-progress")
     driver = psutil.Process(proc.pid)
-    kids = _wait(lambda: [k for k in driver.children() if "spawn_main" in " ".join(k.cmdline())] if list(
+    kids = wait_for(lambda: [k for k in driver.children() if "spawn_main" in " ".join(k.cmdline())] if list(
         out.glob("*.partial")) else None, 240, "workers writing shards")
     proc.send_signal(signal.SIGTERM)  # the driver only, not its process group
     proc.wait(timeout=30)
@@ -304,8 +288,6 @@ def test_resume_refuses_other_recipe(reference, tmp_path):
 
 def test_resume_across_a_schema_that_gained_a_field(reference, tmp_path):
     """A dataset begun by a crackgen without ``stereo.sgbm_input``: other hash, same recipe -> resumes."""
-    import json
-
     from crackgen.datagen.generate import GenerateError
 
     out = tmp_path / "older"

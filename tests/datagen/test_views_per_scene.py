@@ -11,11 +11,11 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from run_watch import done_shards, wait_for
 from tiny_recipes import tiny_recipe
 
 from crackgen.config.recipe import parse_recipe
@@ -115,14 +115,6 @@ def test_two_workers_give_byte_identical_shards(reference, tmp_path):
     _assert_same_bytes(reference, tmp_path / "w2")
 
 
-def _done_shards(out: Path) -> int:
-    """Shards the manifest records as done; 0 while it is not written yet."""
-    try:
-        return len(Manifest.load(out).done())
-    except (OSError, ValueError):  # ManifestError is a ValueError
-        return 0
-
-
 @pytest.mark.blender
 @pytest.mark.slow
 def test_kill_then_resume_gives_byte_identical_shards(reference, tmp_path):
@@ -132,12 +124,9 @@ def test_kill_then_resume_gives_byte_identical_shards(reference, tmp_path):
     exe = str(Path(sys.executable).with_name("crackgen"))
     proc = subprocess.Popen([exe, "generate", str(recipe), "--out", str(out), "--workers", "1", "--no-progress"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-    t0 = time.time()
-    # killed once the manifest records the first shard (the shard file lands a moment before the manifest
-    # does), with the second (scene 0's last view) unfinished
-    while _done_shards(out) < 1:
-        assert time.time() - t0 < 240 and proc.poll() is None, "no first shard"
-        time.sleep(0.1)
+    # killed once the manifest records the first shard, with the second (scene 0's last view) unfinished
+    wait_for(lambda: done_shards(out) >= 1 or proc.poll() is not None, 240, "the first finished shard")
+    assert proc.poll() is None, "the run ended before it could be killed"
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait(timeout=30)
     assert 1 <= len(Manifest.load(out).done()) < 4
