@@ -10,3 +10,16 @@ from __future__ import annotations
 
 class CrackgenError(Exception):
     """Catch this to catch everything crackgen raises deliberately."""
+
+
+def path_error_line(exc: OSError) -> str:
+    """One line for an OSError about a path the user gave (``exc.filename`` set), without the traceback.
+
+    Why: makedirs under a dangling link says "File exists", which names nothing the user can fix.
+    """
+    import os
+
+    name = str(exc.filename)
+    if os.path.islink(name) and not os.path.exists(name):
+        return f"{name}: a link to a missing target ({os.readlink(name)}); cannot write under it"
+    return f"{name}: {exc.strerror or exc}"

@@ -13,6 +13,7 @@ import sys
 from typing import Sequence
 
 from crackgen.cli_aliases import deprecation_note
+from crackgen.errors import path_error_line
 from fusion.errors import FusionError
 from trainer.core.errors import TrainerInputError
 
@@ -52,6 +53,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return args.func(args)
     except (TrainerInputError, FusionError) as exc:
         print(f"cracktrain {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as exc:
+        if not exc.filename:  # not about a path the user gave: a defect, keep its traceback
+            raise
+        # e.g. --out under a file or a dangling link, a full disk, no permission
+        print(f"cracktrain {args.command}: error: {path_error_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print(f"cracktrain {args.command}: interrupted", file=sys.stderr)

@@ -12,6 +12,7 @@ import sys
 
 from crackgen import __version__
 from crackgen.cli_aliases import deprecated_alias
+from crackgen.errors import path_error_line
 
 EXIT_BAD_INPUT = 1
 EXIT_RUN_FAILED = 3
@@ -386,6 +387,10 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except FusionError as exc:  # bad geometry or sensor input that no command-specific check caught first
         return _err(str(exc))
+    except OSError as exc:
+        if not exc.filename:  # not about a path the user gave: a defect, keep its traceback
+            raise
+        return _err(path_error_line(exc))  # e.g. an output under a file or a dangling link
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
