@@ -18,8 +18,10 @@ def path_error_line(exc: OSError) -> str:
     Why: makedirs under a dangling link says "File exists", which names nothing the user can fix.
     """
     import os
+    from pathlib import Path
 
     name = str(exc.filename)
-    if os.path.islink(name) and not os.path.exists(name):
-        return f"{name}: a link to a missing target ({os.readlink(name)}); cannot write under it"
+    for p in (Path(name), *Path(name).parents):  # the path itself or a folder above it
+        if p.is_symlink() and not p.exists():
+            return f"{p}: a link to a missing target ({os.readlink(p)}); cannot write under it"
     return f"{name}: {exc.strerror or exc}"

@@ -22,7 +22,7 @@ from crackgen.config.recipe_compat import resume_check
 from crackgen.datagen.backends import BACKENDS, Job, worker_versions
 from crackgen.datagen.heap import HeapSettingError, mmap_threshold_from_env
 from crackgen.datagen.tasks import ShardResult, ShardTask
-from crackgen.errors import CrackgenError
+from crackgen.errors import CrackgenError, path_error_line
 from crackgen.postrender.targets import TargetError, TargetPhotos
 from crackgen.shards import clean_partials
 from crackgen.shards.manifest import Manifest, ManifestError, ShardInfo, shard_index
@@ -137,7 +137,7 @@ def prepare_output(recipe: Recipe, out: str, resume: bool, storage_options: Mapp
         try:
             os.makedirs(local_path(out), exist_ok=True)
         except OSError as exc:  # a parent that is a file, a broken link, no permission, a full disk
-            raise GenerateError(f"{out}: cannot create the output directory ({exc.strerror or exc})") from None
+            raise GenerateError(f"{out}: cannot create the output directory ({path_error_line(exc)})") from None
         clean_partials(out)
     todo = []
     for task in plan:
