@@ -7,6 +7,8 @@ refusal from a bug with a single ``except``. Pure Python: trainer may import it.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 
 class CrackgenError(Exception):
     """Catch this to catch everything crackgen raises deliberately."""
@@ -17,11 +19,8 @@ def path_error_line(exc: OSError) -> str:
 
     Why: makedirs under a dangling link says "File exists", which names nothing the user can fix.
     """
-    import os
-    from pathlib import Path
-
     name = str(exc.filename)
     for p in (Path(name), *Path(name).parents):  # the path itself or a folder above it
         if p.is_symlink() and not p.exists():
-            return f"{p}: a link to a missing target ({os.readlink(p)}); cannot write under it"
+            return f"{p}: a link to a missing target ({p.readlink()}); cannot write under it"
     return f"{name}: {exc.strerror or exc}"
